@@ -1,0 +1,68 @@
+# Compiler flags shared by every target, and the helpers that declare libraries, executables,
+# tests and benchmarks the same way everywhere.
+include_guard(GLOBAL)
+
+add_library(fastslam_warnings INTERFACE)
+target_compile_options(fastslam_warnings INTERFACE
+  -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor -Wcast-align -Woverloaded-virtual
+  -Wnull-dereference -Wimplicit-fallthrough
+  $<$<BOOL:${FASTSLAM_WERROR}>:-Werror>)
+
+add_library(fastslam_sanitize INTERFACE)
+if(FASTSLAM_SANITIZE)
+  list(JOIN FASTSLAM_SANITIZE "," _fastslam_san)
+  target_compile_options(fastslam_sanitize INTERFACE -fsanitize=${_fastslam_san}
+    -fno-omit-frame-pointer -fno-sanitize-recover=all)
+  target_link_options(fastslam_sanitize INTERFACE -fsanitize=${_fastslam_san})
+endif()
+
+# fastslam_library(NAME SOURCES ... DEPS ...): the library of one source folder, exported as
+# fastslam::NAME; includes are by path from the repository root ("memory/landmark_tree.h").
+function(fastslam_library name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  add_library(fastslam_${name} ${ARG_SOURCES})
+  add_library(fastslam::${name} ALIAS fastslam_${name})
+  set_target_properties(fastslam_${name} PROPERTIES EXPORT_NAME ${name} OUTPUT_NAME fastslam_${name})
+  target_include_directories(fastslam_${name} PUBLIC
+    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>
+    $<INSTALL_INTERFACE:include/fastslam>)
+  target_link_libraries(fastslam_${name} PUBLIC ${ARG_DEPS}
+    PRIVATE $<BUILD_INTERFACE:fastslam_warnings> $<BUILD_INTERFACE:fastslam_sanitize>)
+  target_compile_features(fastslam_${name} PUBLIC cxx_std_20)
+  set_property(GLOBAL APPEND PROPERTY FASTSLAM_LIBRARIES fastslam_${name})
+endfunction()
+
+# Every executable we ship (CLI, tests, benchmarks) gets jemalloc as its malloc, unless a
+# sanitizer brings its own allocator.
+function(fastslam_executable_setup target)
+  target_link_libraries(${target} PRIVATE fastslam_warnings fastslam_sanitize)
+  if(FASTSLAM_WITH_JEMALLOC)
+    target_link_libraries(${target} PRIVATE PkgConfig::JEMALLOC)
+  endif()
+endfunction()
+
+# fastslam_test(NAME SOURCES ... DEPS ... LABELS ...): one GoogleTest executable, one CTest entry.
+function(fastslam_test name)
+  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;DEPS;LABELS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main)
+  fastslam_executable_setup(${name})
+  add_test(NAME ${name} COMMAND ${name} --gtest_brief=1)
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 900)
+  endif()
+  set_tests_properties(${name} PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT}
+    ENVIRONMENT "FASTSLAM_SHARED_DIR=${PROJECT_SOURCE_DIR}/../shared")
+endfunction()
+
+# fastslam_benchmark(NAME SOURCES ... DEPS ...): one Google Benchmark executable, plus a CTest
+# smoke entry (label "bench-smoke") that runs every benchmark once at its smallest size.
+function(fastslam_benchmark name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} benchmark::benchmark benchmark::benchmark_main)
+  fastslam_executable_setup(${name})
+  add_test(NAME ${name}_smoke COMMAND ${name} --benchmark_min_time=0)
+  set_tests_properties(${name}_smoke PROPERTIES LABELS "bench-smoke" TIMEOUT 600
+    ENVIRONMENT "FASTSLAM_BENCH_SMOKE=1")
+endfunction()

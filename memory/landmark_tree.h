@@ -1,0 +1,243 @@
+// The map of one particle: a persistent, reference-counted radix tree of landmarks.
+//
+// Design note (FastSLAM paper, section 8 and figure 9). Every particle owns a map; after
+// resampling many particles hold the same map, and a step changes only the few landmarks in
+// view. So a map is a tree whose nodes are shared between particles: copying a map copies one
+// root pointer (O(1)); changing landmark i copies the root-to-leaf path of i and shares every
+// other subtree with the source ("path copying"). A node whose reference count is one belongs
+// to this map alone and is changed in place, as immer's transients do, so ten updates under one
+// subtree copy its path once, not ten times.
+//
+// Shape: a radix tree over slots (dense indices) with `2^kInnerBits` children per inner node
+// and `2^kLeafBits` landmarks stored inline per leaf; see docs/memory.md for why the default
+// fanout was chosen (measured). Slots are stable for a landmark's life: `insert` returns the
+// lowest free slot (slots of erased landmarks are reused, so the slot space stays as large as
+// the live map, not as the history), `erase` frees one. Iteration is in slot order.
+//
+// Ownership: a tree borrows its `NodeHeap`, which must outlive it and every copy of it. All
+// copies of a tree share its heap.
+// Thread safety: a tree handle is thread-compatible (const methods may run concurrently; a
+// mutating method needs exclusive use of that handle). Different handles that share nodes may
+// be copied, read, mutated and destroyed from any threads at once: counts are atomic (relaxed
+// increment, acquire-release decrement) and a shared node is never written, only copied.
+// Costs (N live landmarks, h = tree height = O(log N)):
+//   copy, move, size, empty: O(1), no allocation.
+//   find, at: O(h), no allocation.
+//   edit, set: O(h); copies each shared node on the path (at most h + 1 allocations).
+//   insert, erase: O(h * 2^kInnerBits) to find/free the slot; allocation as for edit.
+//   destruction: O(1) while other handles share the root; freeing a whole map is iterative
+//   (no recursion) and frees exactly the nodes no other map holds.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <iterator>
+
+#include "memory/node_heap.h"
+
+namespace fastslam::memory {
+
+// One landmark of one particle: a 2-D Gaussian, its existence log-odds, and the bookkeeping the
+// engine tracks it by. 64 bytes, trivially copyable.
+struct Landmark {
+  double x = 0.0;  // mean
+  double y = 0.0;
+  double sxx = 0.0;  // covariance (symmetric 2x2: xx, xy, yy)
+  double sxy = 0.0;
+  double syy = 0.0;
+  double log_odds = 0.0;     // existence (ALGORITHM.md, eq. 73-75)
+  std::uint64_t id = 0;      // identity set by the engine, stable across copies
+  std::int64_t last_seen = 0;  // step of the last association
+  friend bool operator==(const Landmark&, const Landmark&) = default;
+};
+static_assert(sizeof(Landmark) == 64);
+
+using Slot = std::uint32_t;
+
+// Reference count policies. `AtomicRefcount` is the default and the only one safe when maps
+// are shared across threads; `LocalRefcount` is for single-threaded use and for tests that run
+// one suite over both.
+struct AtomicRefcount {
+  std::atomic<std::uint32_t> count{1};
+  void acquire() noexcept { count.fetch_add(1, std::memory_order_relaxed); }
+  // True when this was the last reference: the caller then owns the node and frees it.
+  bool release() noexcept { return count.fetch_sub(1, std::memory_order_acq_rel) == 1; }
+  // Acquire: writes of the thread that dropped the count to one happen before ours.
+  bool unique() const noexcept { return count.load(std::memory_order_acquire) == 1; }
+};
+
+struct LocalRefcount {
+  std::uint32_t count = 1;
+  void acquire() noexcept { ++count; }
+  bool release() noexcept { return --count == 0; }
+  bool unique() const noexcept { return count == 1; }
+};
+
+// A memory policy bundle (as immer's memory_policy): the shape and the counting.
+template <unsigned InnerBits, unsigned LeafBits, class Refcount>
+struct TreePolicy {
+  static constexpr unsigned kInnerBits = InnerBits;
+  static constexpr unsigned kLeafBits = LeafBits;
+  using RefcountType = Refcount;
+};
+
+// The default: 16-way inner nodes, 4 landmarks per leaf (docs/memory.md has the measurements).
+using DefaultTreePolicy = TreePolicy<4, 2, AtomicRefcount>;
+
+template <class Policy>
+class BasicLandmarkTree {
+ public:
+  static constexpr unsigned kInnerBits = Policy::kInnerBits;
+  static constexpr unsigned kLeafBits = Policy::kLeafBits;
+  static constexpr unsigned kInnerWidth = 1u << kInnerBits;
+  static constexpr unsigned kLeafWidth = 1u << kLeafBits;
+  static_assert(kInnerBits >= 1 && kInnerBits <= 8 && kLeafBits <= 5);
+  // Height of a tree whose capacity covers every 32-bit slot.
+  static constexpr unsigned kMaxHeight = (32 - kLeafBits + kInnerBits - 1) / kInnerBits;
+
+  // An empty map whose nodes will come from `heap`.
+  explicit BasicLandmarkTree(NodeHeap& heap) noexcept : heap_(&heap) {}
+  BasicLandmarkTree(const BasicLandmarkTree& other) noexcept;
+  BasicLandmarkTree(BasicLandmarkTree&& other) noexcept;
+  BasicLandmarkTree& operator=(const BasicLandmarkTree& other) noexcept;
+  BasicLandmarkTree& operator=(BasicLandmarkTree&& other) noexcept;
+  ~BasicLandmarkTree();
+
+  std::size_t size() const noexcept { return size_; }
+  bool empty() const noexcept { return size_ == 0; }
+  // Slots [0, capacity()) are addressable without growing the tree.
+  std::uint64_t capacity() const noexcept;
+  unsigned height() const noexcept { return height_; }
+  NodeHeap& heap() const noexcept { return *heap_; }
+  // True when both handles hold the very same root (a copy not yet changed).
+  bool shares_root_with(const BasicLandmarkTree& other) const noexcept {
+    return root_ == other.root_;
+  }
+
+  // The landmark in `slot`, or nullptr when the slot is empty or beyond capacity.
+  const Landmark* find(Slot slot) const noexcept;
+  bool contains(Slot slot) const noexcept { return find(slot) != nullptr; }
+  // The landmark in `slot`. Throws std::out_of_range naming the slot when it holds none.
+  const Landmark& at(Slot slot) const;
+
+  // A writable reference to the landmark in `slot`, after copying the shared nodes on its path.
+  // The reference is valid until the next mutation, copy or destruction of this handle.
+  // Throws std::out_of_range when the slot holds no landmark (and changes nothing), or
+  // std::bad_alloc (the map then still holds the same landmarks).
+  Landmark& edit(Slot slot);
+  void set(Slot slot, const Landmark& landmark) { edit(slot) = landmark; }
+
+  // Stores `landmark` in the lowest free slot and returns it. Throws std::bad_alloc or
+  // std::length_error (2^32 slots) and then leaves the map's contents unchanged.
+  Slot insert(const Landmark& landmark);
+
+  // Removes the landmark in `slot`. Throws std::out_of_range when the slot holds none (for
+  // example, erased already) and changes nothing.
+  void erase(Slot slot);
+
+  // Removes every landmark (releases this handle's reference to the root).
+  void clear() noexcept;
+
+  // Ordered iteration over (slot, landmark), in increasing slot order.
+  struct Entry {
+    Slot slot;
+    const Landmark& landmark;
+  };
+  class Iterator;
+  Iterator begin() const noexcept;
+  Iterator end() const noexcept;
+
+ private:
+  using Refcount = typename Policy::RefcountType;
+  struct Node {
+    Node() = default;
+    // A copy starts with one reference (the copier's) and the same contents.
+    Node(const Node& other) noexcept : aux(other.aux) {}
+    Node& operator=(const Node&) = delete;
+    mutable Refcount refs;
+    // Inner: landmarks in the subtree. Leaf: occupancy bit mask of `landmarks`.
+    std::uint32_t aux = 0;
+  };
+  struct Inner : Node {
+    Node* child[kInnerWidth] = {};
+  };
+  struct Leaf : Node {
+    Landmark landmarks[kLeafWidth];
+  };
+
+  static std::uint64_t capacity_at(unsigned height) noexcept {
+    return std::uint64_t{kLeafWidth} << (kInnerBits * height);
+  }
+  static unsigned child_index(Slot slot, unsigned height) noexcept {
+    return (slot >> (kLeafBits + kInnerBits * (height - 1))) & (kInnerWidth - 1);
+  }
+  static std::uint32_t live_of(const Node* node, unsigned height) noexcept;
+
+  // A node from the heap, constructed from `args` (nothing, or the node to copy).
+  template <class T, class... Args>
+  T* make(Args&&... args);
+  // Path copying, the one primitive every mutation goes through: returns a node equal to
+  // `node` (of the given height) that this map owns alone. A null node becomes an empty one; a
+  // uniquely held node is returned as is; a shared node is copied (its children gain a
+  // reference) and the map's reference to the original is dropped.
+  Node* own(Node* node, unsigned height);
+  // Drops one reference to `node`; frees it and, iteratively, every descendant that no other
+  // map holds.
+  static void release(Node* node, unsigned height, NodeHeap& heap) noexcept;
+  static void free_node(Node* node, unsigned height, NodeHeap& heap) noexcept;
+
+  // Owns the path to `slot` (creating empty nodes where there are none) and fills `path` with
+  // the inner nodes from the root down; returns the leaf.
+  Leaf* own_path(Slot slot, std::array<Inner*, kMaxHeight>& path);
+  // Frees the empty nodes on the (owned) path to `slot` and removes needless top levels.
+  void prune(Slot slot) noexcept;
+  // The lowest free slot below capacity(), or capacity() when the tree is full.
+  std::uint64_t lowest_free_slot() const noexcept;
+
+  Node* root_ = nullptr;
+  NodeHeap* heap_;
+  std::uint32_t height_ = 0;  // inner levels above the leaves
+  std::uint32_t size_ = 0;
+};
+
+template <class Policy>
+class BasicLandmarkTree<Policy>::Iterator {
+ public:
+  using iterator_category = std::forward_iterator_tag;
+  using value_type = Entry;
+  using difference_type = std::ptrdiff_t;
+  using reference = Entry;
+
+  Iterator() = default;
+  Entry operator*() const noexcept { return {slot_, leaf_->landmarks[slot_ & (kLeafWidth - 1)]}; }
+  Iterator& operator++() noexcept;
+  Iterator operator++(int) noexcept {
+    Iterator before = *this;
+    ++*this;
+    return before;
+  }
+  friend bool operator==(const Iterator& a, const Iterator& b) noexcept {
+    return a.leaf_ == b.leaf_ && (a.leaf_ == nullptr || a.slot_ == b.slot_);
+  }
+
+ private:
+  friend class BasicLandmarkTree;
+  // Moves to the first landmark at or after `from` (slot) or to end().
+  void seek(std::uint64_t from) noexcept;
+
+  const Node* root_ = nullptr;
+  unsigned height_ = 0;
+  const Leaf* leaf_ = nullptr;  // null at end()
+  Slot slot_ = 0;
+};
+
+using LandmarkTree = BasicLandmarkTree<DefaultTreePolicy>;
+
+extern template class BasicLandmarkTree<DefaultTreePolicy>;
+extern template class BasicLandmarkTree<TreePolicy<4, 2, LocalRefcount>>;
+
+}  // namespace fastslam::memory
+
+#include "memory/internal/landmark_tree_impl.h"

@@ -1,0 +1,93 @@
+#include "memory/node_heap.h"
+
+#include <cstdlib>
+#include <new>
+
+namespace fastslam::memory {
+namespace {
+
+void bump(std::atomic<std::int64_t>& counter, std::int64_t delta) noexcept {
+  // Only the owning thread writes its counter, so load + store is enough (and cheaper than RMW).
+  counter.store(counter.load(std::memory_order_relaxed) + delta, std::memory_order_relaxed);
+}
+
+}  // namespace
+
+void* NodeHeap::allocate(std::size_t bytes) {
+  void* block = do_allocate(bytes);
+  Counters& c = counters_.local();
+  bump(c.nodes, 1);
+  bump(c.bytes, static_cast<std::int64_t>(bytes));
+  bump(c.allocations, 1);
+  return block;
+}
+
+void NodeHeap::deallocate(void* block, std::size_t bytes) noexcept {
+  Counters& c = counters_.local();
+  bump(c.nodes, -1);
+  bump(c.bytes, -static_cast<std::int64_t>(bytes));
+  do_deallocate(block, bytes);
+}
+
+HeapStats NodeHeap::stats() const {
+  HeapStats total;
+  for (const Counters& c : counters_) {
+    total.live_nodes += c.nodes.load(std::memory_order_relaxed);
+    total.live_bytes += c.bytes.load(std::memory_order_relaxed);
+    total.allocations += c.allocations.load(std::memory_order_relaxed);
+  }
+  return total;
+}
+
+void* MallocHeap::do_allocate(std::size_t bytes) { return ::operator new(bytes); }
+
+void MallocHeap::do_deallocate(void* block, std::size_t bytes) noexcept {
+  ::operator delete(block, bytes);
+}
+
+PoolHeap::PoolHeap(std::size_t max_cached_per_size) : max_cached_(max_cached_per_size) {}
+
+PoolHeap::~PoolHeap() {
+  for (Cache& cache : caches_) {
+    for (int k = 0; k < kSizeClasses; ++k) {
+      while (FreeBlock* block = cache.head[k]) {
+        cache.head[k] = block->next;
+        ::operator delete(block, cache.size[k]);
+      }
+    }
+  }
+}
+
+void* PoolHeap::do_allocate(std::size_t bytes) {
+  Cache& cache = caches_.local();
+  for (int k = 0; k < kSizeClasses && cache.size[k] != 0; ++k) {
+    if (cache.size[k] == bytes) {
+      if (FreeBlock* block = cache.head[k]) {
+        cache.head[k] = block->next;
+        --cache.count[k];
+        return block;
+      }
+      break;
+    }
+  }
+  return ::operator new(bytes < sizeof(FreeBlock) ? sizeof(FreeBlock) : bytes);
+}
+
+void PoolHeap::do_deallocate(void* block, std::size_t bytes) noexcept {
+  if (bytes < sizeof(FreeBlock)) bytes = sizeof(FreeBlock);
+  Cache& cache = caches_.local();
+  for (int k = 0; k < kSizeClasses; ++k) {
+    if (cache.size[k] == 0) cache.size[k] = bytes;  // first free of a new size claims a class
+    if (cache.size[k] == bytes) {
+      if (cache.count[k] >= max_cached_) break;
+      auto* free_block = static_cast<FreeBlock*>(block);
+      free_block->next = cache.head[k];
+      cache.head[k] = free_block;
+      ++cache.count[k];
+      return;
+    }
+  }
+  ::operator delete(block, bytes);
+}
+
+}  // namespace fastslam::memory
