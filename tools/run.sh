@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# The main job: installs what is missing, builds the release preset, and runs the engine on its
+# built-in default. Extra arguments go to the `fastslam` command line instead of the default.
+set -euo pipefail
+FASTSLAM_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$FASTSLAM_ROOT"
+source tools/lib/setup.sh
+
+fastslam_install_packages
+fastslam_setup_ccache
+mkdir -p build
+fastslam_build release
+
+if [ $# -gt 0 ]; then
+  exec build/release/tools/fastslam "$@"
+fi
+exec build/release/tools/fastslam memory-demo --out out/memory-demo
