@@ -1,2 +1,433 @@
-// placeholder, replaced by the parallel/ work in progress
-// NOTE from the lead to the helper replacing this file: do NOT git commit/add/stash (the lead commits); build in your own dir (cmake -S . -B build/<yourname> ...), not build/release; benchmarks honour fastslam::bench::upto(full,tiny) from bench/bench_util.h (FASTSLAM_BENCH_SMOKE=1 => tiny sizes); keep each test exe under ~20 s in release.
+#include "parallel/random_stream.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cassert>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "parallel/internal/philox.h"
+
+namespace fastslam::parallel {
+namespace {
+
+using internal::philox4x32_10;
+using internal::philox4x32_10_lanes;
+using internal::PhiloxKey;
+using internal::PhiloxLanes;
+
+// Compile-time self-check against Random123's known-answer vectors (kat_vectors there).
+static_assert(philox4x32_10({0, 0, 0, 0}, {0, 0}) ==
+              internal::PhiloxCounter{0x6627e8d5u, 0xe169c58du, 0xbc57ac4cu, 0x9b00dbd8u});
+static_assert(philox4x32_10({0xffffffffu, 0xffffffffu, 0xffffffffu, 0xffffffffu},
+                            {0xffffffffu, 0xffffffffu}) ==
+              internal::PhiloxCounter{0x408f276du, 0x41c83b0eu, 0xa20bc7c6u, 0x6d5451fdu});
+static_assert(philox4x32_10({0x243f6a88u, 0x85a308d3u, 0x13198a2eu, 0x03707344u},
+                            {0xa4093822u, 0x299f31d0u}) ==
+              internal::PhiloxCounter{0xd16cfe09u, 0x94fdccebu, 0x5001e420u, 0x24126ea1u});
+
+// Philox blocks computed side by side in the batch paths: 16 lanes of 64 bits = two AVX-512
+// (four AVX2) registers per counter word; the last few blocks of a batch go 4 at a time.
+constexpr std::size_t kLanes = 16;
+constexpr std::size_t kTailLanes = 4;
+
+// ---------------------------------------------------------------------------------------------
+// Floating point. Everything below is written so that the compiler has no freedom that could
+// change a result between the scalar path and the vectorised one: every multiply-add is an
+// explicit fma where the target has a fast fma (FP_FAST_FMA; then std::fma is one instruction)
+// and a plain a * b + c where it has none (then the compiler cannot contract either), and no
+// other product feeds an addition (so -ffp-contract has nothing to contract). No libm calls:
+// glibc's vector and scalar log/sin/cos need not agree, and sqrt under -fmath-errno blocks
+// vectorisation. The errors below were measured against long-double libm on 2e7 random
+// arguments; random_stream_test checks the composite Box-Muller pair (within 8 ulp of
+// max(r, 1); measured 1.4).
+
+#if defined(FP_FAST_FMA)
+[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
+  return std::fma(a, b, c);
+}
+#else
+[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
+  return a * b + c;
+}
+#endif
+
+// Natural log of a positive normal double; error below 0.75 ulp (measured).
+// Reduction from musl's log (x = 2^k m, m in [sqrt(2)/2, sqrt(2))); polynomial from fdlibm's
+// e_log.c (Sun Microsystems, 1993): log(m) = 2 atanh(s), s = f / (2 + f), f = m - 1.
+[[gnu::always_inline]] inline double log_positive(double x) noexcept {
+  constexpr double kLn2Hi = 6.93147180369123816490e-01;  // k * kLn2Hi is exact for |k| < 2^11
+  constexpr double kLn2Lo = 1.90821492927058770002e-10;
+  constexpr double kLg1 = 6.666666666666735130e-01;
+  constexpr double kLg2 = 3.999999999940941908e-01;
+  constexpr double kLg3 = 2.857142874366239149e-01;
+  constexpr double kLg4 = 2.222219843214978396e-01;
+  constexpr double kLg5 = 1.818357216161805012e-01;
+  constexpr double kLg6 = 1.531383769920937332e-01;
+  constexpr double kLg7 = 1.479819860511658591e-01;
+  constexpr std::uint64_t kOff = 0x3FE6A09E667F3BCDu;  // bits of sqrt(2) / 2
+  const auto bits = std::bit_cast<std::uint64_t>(x);
+  const std::uint64_t tmp = bits - kOff;
+  const std::int64_t k = static_cast<std::int64_t>(tmp) >> 52;  // arithmetic shift (C++20)
+  const double m = std::bit_cast<double>(bits - (tmp & 0xFFF0000000000000u));
+  const auto dk = static_cast<double>(k);
+  const double f = m - 1.0;  // exact (Sterbenz)
+  const double s = f / (2.0 + f);
+  const double z = s * s;
+  const double w = z * z;
+  const double odd = z * madd(w, madd(w, madd(w, kLg7, kLg5), kLg3), kLg1);
+  const double r = madd(w, madd(w, madd(w, kLg6, kLg4), kLg2), odd);
+  const double hf = 0.5 * f;                                  // f * f / 2 = hf * f
+  const double inner = madd(s, madd(hf, f, r), dk * kLn2Lo);  // s (f^2/2 + R) + k ln2_lo
+  const double tail = madd(hf, f, -inner);                    // f^2/2 - inner
+  return madd(dk, kLn2Hi, f - tail);
+}
+
+// sqrt(v) for 0 <= v < 2^1000 (here v <= 74): reciprocal square root y by Newton from the
+// bit-level first guess (relative error 3.5e-2, then 1.8e-3, 4.7e-6, 3.3e-11), then one Newton
+// step on s = v y, which squares the error to ~1e-21 before rounding: error 0.5 ulp (measured;
+// not proven correctly rounded); sqrt(0) = 0. std::sqrt would not vectorise under -fmath-errno
+// (GCC's default), and its correctly rounded result could differ from this one.
+[[gnu::always_inline]] inline double sqrt_nonneg(double v) noexcept {
+  const double h = 0.5 * v;
+  double y = std::bit_cast<double>(0x5FE6EB50C7B537A9u - (std::bit_cast<std::uint64_t>(v) >> 1));
+  for (int i = 0; i < 3; ++i) y = y * madd(-(h * y), y, 1.5);
+  const double s = v * y;
+  return madd(madd(-s, s, v), 0.5 * y, s);  // s + (v - s^2) / (2 sqrt(v))
+}
+
+// Taylor coefficients on [-pi/4, pi/4], highest order first: kSinPoly[i] = (-1)^m / (2m + 1)!
+// for m = 8 - i (a^17 down to a^3), kCosPoly[i] = (-1)^m / (2m)! for m = 8 - i (a^16 down to
+// a^2). The first omitted terms are below 1e-19, far under an ulp.
+constexpr double inverse_factorial(int n) {
+  double f = 1.0;
+  for (int i = 2; i <= n; ++i) f *= i;  // exact up to 18!
+  return 1.0 / f;
+}
+constexpr std::array<double, 8> taylor(int first_odd_or_even) {
+  std::array<double, 8> c{};
+  for (int i = 0; i < 8; ++i) {
+    const int m = 8 - i;
+    c[i] = (m % 2 == 0 ? 1.0 : -1.0) * inverse_factorial(2 * m + first_odd_or_even);
+  }
+  return c;
+}
+constexpr std::array<double, 8> kSinPoly = taylor(1);
+constexpr std::array<double, 8> kCosPoly = taylor(0);
+
+// cos(2 pi t) and sin(2 pi t) for t = turns * 2^-53, turns an integer in [0, 2^53); absolute
+// error below 1.4 * 2^-53 (measured). The quadrant comes from rounding 4t, which is exact, so
+// there is no argument-reduction error.
+[[gnu::always_inline]] inline void sincos_turns(double turns, double& cos_out,
+                                                double& sin_out) noexcept {
+  constexpr double kShift = 0x1.8p52;  // adding it rounds [0, 2^51) to an integer
+  constexpr double kHalfPi = 1.57079632679489661923;
+  const double shifted = madd(turns, 0x1p-51, kShift);  // kShift + round(4t), ties to even
+  const auto quadrant = std::bit_cast<std::uint64_t>(shifted) & 3u;
+  const double r = madd(turns, 0x1p-51, -(shifted - kShift));  // 4t - round(4t), exact
+  const double a = r * kHalfPi;                                // in [-pi/4, pi/4]
+  const double z = a * a;
+  double sin_poly = kSinPoly[0];
+  double cos_poly = kCosPoly[0];
+  for (std::size_t i = 1; i < kSinPoly.size(); ++i) {
+    sin_poly = madd(z, sin_poly, kSinPoly[i]);
+    cos_poly = madd(z, cos_poly, kCosPoly[i]);
+  }
+  const double sin_a = madd(a * z, sin_poly, a);
+  const double cos_a = madd(z, cos_poly, 1.0);
+  // Angle = quadrant * pi/2 + a.
+  const bool swap = (quadrant & 1u) != 0;
+  const double c = swap ? sin_a : cos_a;
+  const double s = swap ? cos_a : sin_a;
+  cos_out = ((quadrant + 1) & 2u) != 0 ? -c : c;  // quadrants 1, 2
+  sin_out = (quadrant & 2u) != 0 ? -s : s;        // quadrants 2, 3
+}
+
+// Box-Muller on two 64-bit draws (see the header).
+[[gnu::always_inline]] inline void box_muller(std::uint64_t a, std::uint64_t b, double& z0,
+                                              double& z1) noexcept {
+  const double u = static_cast<double>(static_cast<std::int64_t>((a >> 11) + 1)) * 0x1p-53;
+  const double radius = sqrt_nonneg(-2.0 * log_positive(u));
+  double c = 0.0;
+  double s = 0.0;
+  sincos_turns(static_cast<double>(static_cast<std::int64_t>(b >> 11)), c, s);
+  z0 = radius * c;
+  z1 = radius * s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Keys and lanes.
+
+struct KeyWords {
+  PhiloxKey key;
+  std::uint32_t step_low;
+  std::uint32_t step_high_purpose;
+};
+
+KeyWords key_words(std::uint64_t seed, std::uint64_t step, Purpose purpose) noexcept {
+  assert(step < (std::uint64_t{1} << 56) && "step must be below 2^56");
+  assert(static_cast<std::uint32_t>(purpose) < 256 && "purpose must be below 256");
+  return {{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32)},
+          static_cast<std::uint32_t>(step),
+          (static_cast<std::uint32_t>(purpose) & 0xFFu) << 24 |
+              (static_cast<std::uint32_t>(step >> 32) & 0xFFFFFFu)};
+}
+
+// The two 64-bit draws of lane l's block.
+template <std::size_t L>
+[[gnu::always_inline]] inline std::uint64_t first_u64(const PhiloxLanes<L>& lanes,
+                                                      std::size_t l) noexcept {
+  return lanes.x0[l] | lanes.x1[l] << 32;
+}
+template <std::size_t L>
+[[gnu::always_inline]] inline std::uint64_t second_u64(const PhiloxLanes<L>& lanes,
+                                                       std::size_t l) noexcept {
+  return lanes.x2[l] | lanes.x3[l] << 32;
+}
+
+// Each lane's block to two normals (cos, sin halves of its Box-Muller pair).
+struct LanesToNormals {
+  template <std::size_t L>
+  void operator()(const PhiloxLanes<L>& lanes, double* z0, double* z1) const noexcept {
+    for (std::size_t l = 0; l < L; ++l) {
+      box_muller(first_u64(lanes, l), second_u64(lanes, l), z0[l], z1[l]);
+    }
+  }
+};
+
+// Each lane's block to two uniforms.
+struct LanesToUniforms {
+  template <std::size_t L>
+  void operator()(const PhiloxLanes<L>& lanes, double* u0, double* u1) const noexcept {
+    for (std::size_t l = 0; l < L; ++l) {
+      u0[l] = uniform_from_bits(first_u64(lanes, l));
+      u1[l] = uniform_from_bits(second_u64(lanes, l));
+    }
+  }
+};
+
+// Blocks first_block .. first_block + blocks - 1 of one particle's stream, two values per block,
+// written to out[0 .. 2 * blocks): kLanes blocks at a time, the rest kTailLanes at a time.
+template <std::size_t L, class Convert>
+[[gnu::noinline]] void stream_chunk(const KeyWords& kw, std::uint32_t particle,
+                                    std::uint64_t first_block, std::size_t n, double* out,
+                                    Convert convert) noexcept {
+  PhiloxLanes<L> lanes{};
+  for (std::size_t l = 0; l < L; ++l) {
+    lanes.x0[l] = (first_block + l) & 0xFFFFFFFFu;  // lanes past n are computed, not stored
+    lanes.x1[l] = particle;
+  }
+  philox4x32_10_lanes(kw.key, kw.step_low, kw.step_high_purpose, lanes);
+  alignas(64) double v0[L];
+  alignas(64) double v1[L];
+  convert(lanes, v0, v1);
+  for (std::size_t l = 0; l < n; ++l) {
+    out[2 * l] = v0[l];
+    out[2 * l + 1] = v1[l];
+  }
+}
+
+template <class Convert>
+void stream_blocks(const KeyWords& kw, std::uint32_t particle, std::uint64_t first_block,
+                   std::uint64_t blocks, double* out, Convert convert) noexcept {
+  assert(first_block + blocks <= (std::uint64_t{1} << 32) && "more than 2^32 blocks per stream");
+  std::uint64_t done = 0;
+  for (; blocks - done >= kLanes; done += kLanes) {
+    stream_chunk<kLanes>(kw, particle, first_block + done, kLanes, out + 2 * done, convert);
+  }
+  for (; done < blocks; done += kTailLanes) {
+    const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(kTailLanes, blocks - done));
+    stream_chunk<kTailLanes>(kw, particle, first_block + done, n, out + 2 * done, convert);
+  }
+}
+
+// Where a batch is: its next item is block `block` of particle first_particle + `particle`, whose
+// two values go to dst[0], dst[1].
+struct BatchCursor {
+  std::uint64_t particle = 0;
+  std::uint64_t block = 0;
+  double* dst = nullptr;
+};
+
+// The next n <= L items of a batch. Items (particle k, block b) are enumerated particle-major;
+// item (k, b) fills out[k * per_particle + 2b] and out[k * per_particle + 2b + 1]. For an odd
+// per_particle the second value of a particle's last block lands on the next particle's first
+// entry, which that particle's first item (the next one in order) overwrites; only the very last
+// item of the batch (`ends_batch`) must skip it, as it would fall past the end of out.
+template <std::size_t L, class Convert>
+[[gnu::noinline]] void particle_chunk(const KeyWords& kw, std::uint32_t first_particle,
+                                      std::uint64_t blocks, bool odd, std::size_t n,
+                                      bool ends_batch, BatchCursor& at, Convert convert) noexcept {
+  PhiloxLanes<L> lanes{};
+  std::uint64_t k = at.particle;
+  std::uint64_t b = at.block;
+  for (std::size_t l = 0; l < L; ++l) {  // lanes past n are computed, not stored
+    lanes.x0[l] = b & 0xFFFFFFFFu;
+    lanes.x1[l] = (first_particle + k) & 0xFFFFFFFFu;
+    if (++b == blocks) {
+      b = 0;
+      ++k;
+    }
+  }
+  philox4x32_10_lanes(kw.key, kw.step_low, kw.step_high_purpose, lanes);
+  alignas(64) double v0[L];
+  alignas(64) double v1[L];
+  convert(lanes, v0, v1);
+  const std::size_t paired = ends_batch && odd ? n - 1 : n;
+  double* dst = at.dst;
+  k = at.particle;
+  b = at.block;
+  for (std::size_t l = 0; l < n; ++l) {
+    dst[0] = v0[l];
+    if (l < paired) dst[1] = v1[l];
+    dst += 2;
+    if (++b == blocks) {
+      b = 0;
+      ++k;
+      if (odd) --dst;  // the particle had per_particle = 2 blocks - 1 entries
+    }
+  }
+  at = {k, b, dst};
+}
+
+// out[k * per_particle + j] = value j of particle first_particle + k. Items are processed
+// kLanes at a time regardless of particle boundaries, so short streams (per_particle = 3: two
+// blocks) still fill whole vectors; the last few go kTailLanes at a time.
+template <class Convert>
+void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size_t count,
+                     std::size_t per_particle, double* out, Convert convert) noexcept {
+  if (count == 0 || per_particle == 0) return;
+  assert(std::uint64_t{first_particle} + count <= (std::uint64_t{1} << 32) &&
+         "first_particle + count must not exceed 2^32");
+  const std::uint64_t blocks = (std::uint64_t{per_particle} + 1) / 2;
+  assert(blocks <= (std::uint64_t{1} << 32) && "more than 2^32 blocks per stream");
+  const bool odd = per_particle % 2 != 0;
+  const std::uint64_t items = std::uint64_t{count} * blocks;
+  BatchCursor at{0, 0, out};
+  std::uint64_t done = 0;
+  for (; items - done >= kLanes; done += kLanes) {
+    particle_chunk<kLanes>(kw, first_particle, blocks, odd, kLanes, done + kLanes == items, at,
+                           convert);
+  }
+  for (; done < items; done += kTailLanes) {
+    const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(kTailLanes, items - done));
+    particle_chunk<kTailLanes>(kw, first_particle, blocks, odd, n, done + n == items, at, convert);
+  }
+}
+
+}  // namespace
+
+std::array<double, 2> normal_pair_from_bits(std::uint64_t a, std::uint64_t b) noexcept {
+  std::array<double, 2> z{};
+  box_muller(a, b, z[0], z[1]);
+  return z;
+}
+
+RandomStream::RandomStream(const StreamKey& key) noexcept : particle_(key.particle) {
+  const KeyWords kw = key_words(key.seed, key.step, key.purpose);
+  key_ = kw.key;
+  step_low_ = kw.step_low;
+  step_high_purpose_ = kw.step_high_purpose;
+}
+
+void RandomStream::refill(bool with_normals) noexcept {
+  assert(next_block_ < (std::uint64_t{1} << 32) && "more than 2^32 blocks drawn from one stream");
+  PhiloxLanes<kBufferBlocks> lanes{};
+  for (std::size_t l = 0; l < kBufferBlocks; ++l) {
+    lanes.x0[l] = (next_block_ + l) & 0xFFFFFFFFu;
+    lanes.x1[l] = particle_;
+  }
+  philox4x32_10_lanes(key_, step_low_, step_high_purpose_, lanes);
+  for (std::size_t l = 0; l < kBufferBlocks; ++l) {
+    buffer_[4 * l] = static_cast<std::uint32_t>(lanes.x0[l]);
+    buffer_[4 * l + 1] = static_cast<std::uint32_t>(lanes.x1[l]);
+    buffer_[4 * l + 2] = static_cast<std::uint32_t>(lanes.x2[l]);
+    buffer_[4 * l + 3] = static_cast<std::uint32_t>(lanes.x3[l]);
+  }
+  normals_valid_ = with_normals;
+  if (with_normals) {
+    alignas(32) double z0[kBufferBlocks];
+    alignas(32) double z1[kBufferBlocks];
+    LanesToNormals{}(lanes, z0, z1);
+    for (std::size_t l = 0; l < kBufferBlocks; ++l) {
+      normals_[2 * l] = z0[l];
+      normals_[2 * l + 1] = z1[l];
+    }
+  }
+  next_block_ += kBufferBlocks;
+  used_ = 0;
+}
+
+double RandomStream::normal() noexcept {
+  if (has_spare_) {
+    has_spare_ = false;
+    return spare_normal_;
+  }
+  if (used_ == kBufferWords) refill(true);
+  if (used_ % 4 == 0 && normals_valid_) {  // a whole buffered block: its pair is ready
+    const std::size_t pair = used_ / 4;
+    used_ += 4;
+    spare_normal_ = normals_[2 * pair + 1];
+    has_spare_ = true;
+    return normals_[2 * pair];
+  }
+  const std::uint64_t a = next_u64();
+  const std::uint64_t b = next_u64();
+  double z0 = 0.0;
+  box_muller(a, b, z0, spare_normal_);
+  has_spare_ = true;
+  return z0;
+}
+
+void RandomStream::fill_uniform(std::span<double> out) noexcept {
+  std::size_t i = 0;
+  // Drain the buffer through the scalar path; off a block boundary (an odd word count) the
+  // stream never realigns, so it stays scalar.
+  while (i < out.size() && used_ != kBufferWords) {
+    if (used_ % 2 != 0) {
+      for (; i < out.size(); ++i) out[i] = uniform();
+      return;
+    }
+    out[i++] = uniform();
+  }
+  const std::uint64_t blocks = (out.size() - i) / 2;
+  const KeyWords kw{key_, step_low_, step_high_purpose_};
+  stream_blocks(kw, particle_, next_block_, blocks, out.data() + i, LanesToUniforms{});
+  next_block_ += blocks;
+  i += 2 * blocks;
+  if (i < out.size()) out[i] = uniform();
+}
+
+void RandomStream::fill_normal(std::span<double> out) noexcept {
+  std::size_t i = 0;
+  // The spare and the buffered pairs first (scalar); a stream off a block boundary never gets
+  // back to one (every pair draws four words), so it stays scalar to the end.
+  while (i < out.size() && (has_spare_ || used_ != kBufferWords)) out[i++] = normal();
+  const std::uint64_t blocks = (out.size() - i) / 2;
+  const KeyWords kw{key_, step_low_, step_high_purpose_};
+  stream_blocks(kw, particle_, next_block_, blocks, out.data() + i, LanesToNormals{});
+  next_block_ += blocks;
+  i += 2 * blocks;
+  if (i < out.size()) out[i] = normal();  // keeps the sin half as the spare, like normal()
+}
+
+void normals_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
+                           std::uint32_t first_particle, std::size_t count,
+                           std::size_t per_particle, std::span<double> out) noexcept {
+  assert(out.size() == count * per_particle && "out.size() must be count * per_particle");
+  particle_blocks(key_words(seed, step, purpose), first_particle, count, per_particle, out.data(),
+                  LanesToNormals{});
+}
+
+void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
+                            std::uint32_t first_particle, std::size_t count,
+                            std::size_t per_particle, std::span<double> out) noexcept {
+  assert(out.size() == count * per_particle && "out.size() must be count * per_particle");
+  particle_blocks(key_words(seed, step, purpose), first_particle, count, per_particle, out.data(),
+                  LanesToUniforms{});
+}
+
+}  // namespace fastslam::parallel

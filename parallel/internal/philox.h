@@ -1,0 +1,87 @@
+// Philox4x32-10, the counter-based generator behind parallel/random_stream.h. Not API.
+//
+// Salmon, Moraes, Dror, Shaw, "Parallel random numbers: as easy as 1, 2, 3", SC'11; the
+// reference implementation is Random123 (philox.h there). A block is a pure function of a 128-bit
+// counter and a 64-bit key: ten rounds of two 32x32->64 multiplies, xors with the other two
+// counter words and the round key, and a Weyl-sequence key bump between rounds.
+//
+// Two forms, bit-identical by construction (random_stream_test checks both against Random123's
+// known-answer vectors and each other):
+//   - `philox4x32_10`: one block, constexpr, for the scalar stream.
+//   - `philox4x32_10_lanes<L>`: L independent blocks sharing the key and counter words 2 and 3,
+//     written as plain loops over lanes so that g++/clang -O3 vectorise them (each 32-bit word
+//     sits in a 64-bit lane, which maps the 32x32->64 multiply onto vector multiplies).
+// Thread safety: pure functions. Costs: no allocation; about 2 ns per block for the lane form
+// at 16 lanes with AVX-512 (see random_stream_benchmark).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+
+namespace fastslam::parallel::internal {
+
+inline constexpr std::uint32_t kPhiloxM0 = 0xD2511F53u;  // round multipliers
+inline constexpr std::uint32_t kPhiloxM1 = 0xCD9E8D57u;
+inline constexpr std::uint32_t kPhiloxW0 = 0x9E3779B9u;  // key bumps: golden ratio,
+inline constexpr std::uint32_t kPhiloxW1 = 0xBB67AE85u;  // sqrt(3) - 1
+inline constexpr int kPhiloxRounds = 10;
+
+using PhiloxCounter = std::array<std::uint32_t, 4>;
+using PhiloxKey = std::array<std::uint32_t, 2>;
+
+// One Philox4x32-10 block: Random123's philox4x32(ctr, key) with 10 rounds.
+constexpr PhiloxCounter philox4x32_10(PhiloxCounter ctr, PhiloxKey key) noexcept {
+  for (int round = 0; round < kPhiloxRounds; ++round) {
+    if (round > 0) {
+      key[0] += kPhiloxW0;
+      key[1] += kPhiloxW1;
+    }
+    const std::uint64_t p0 = std::uint64_t{kPhiloxM0} * ctr[0];
+    const std::uint64_t p1 = std::uint64_t{kPhiloxM1} * ctr[2];
+    ctr = {static_cast<std::uint32_t>(p1 >> 32) ^ ctr[1] ^ key[0], static_cast<std::uint32_t>(p1),
+           static_cast<std::uint32_t>(p0 >> 32) ^ ctr[3] ^ key[1], static_cast<std::uint32_t>(p0)};
+  }
+  return ctr;
+}
+
+// L blocks side by side. Word w of lane l is x<w>[l]; every value is below 2^32.
+template <std::size_t L>
+struct PhiloxLanes {
+  alignas(64) std::uint64_t x0[L];
+  alignas(64) std::uint64_t x1[L];
+  alignas(64) std::uint64_t x2[L];
+  alignas(64) std::uint64_t x3[L];
+};
+
+// On entry lanes.x0[l], lanes.x1[l] are counter words 0 and 1 of lane l (below 2^32); counter
+// words 2 and 3 are `c2`, `c3` in every lane. On exit lanes holds the L output blocks:
+// lanes.x<w>[l] == philox4x32_10({x0[l], x1[l], c2, c3}, key)[w].
+template <std::size_t L>
+inline void philox4x32_10_lanes(PhiloxKey key, std::uint32_t c2, std::uint32_t c3,
+                                PhiloxLanes<L>& lanes) noexcept {
+  constexpr std::uint64_t kLow = 0xFFFFFFFFu;
+  for (std::size_t l = 0; l < L; ++l) {
+    lanes.x2[l] = c2;
+    lanes.x3[l] = c3;
+  }
+  std::uint64_t k0 = key[0];
+  std::uint64_t k1 = key[1];
+#pragma GCC unroll 10
+  for (int round = 0; round < kPhiloxRounds; ++round) {
+    for (std::size_t l = 0; l < L; ++l) {
+      const std::uint64_t p0 = std::uint64_t{kPhiloxM0} * lanes.x0[l];
+      const std::uint64_t p1 = std::uint64_t{kPhiloxM1} * lanes.x2[l];
+      const std::uint64_t n0 = (p1 >> 32) ^ lanes.x1[l] ^ k0;
+      const std::uint64_t n2 = (p0 >> 32) ^ lanes.x3[l] ^ k1;
+      lanes.x1[l] = p1 & kLow;
+      lanes.x3[l] = p0 & kLow;
+      lanes.x0[l] = n0;
+      lanes.x2[l] = n2;
+    }
+    k0 = (k0 + kPhiloxW0) & kLow;
+    k1 = (k1 + kPhiloxW1) & kLow;
+  }
+}
+
+}  // namespace fastslam::parallel::internal
