@@ -1,0 +1,273 @@
+// Vehicle motion models s_t = h(u_t, s_{t-1}) + delta, delta ~ N(0, P) (paper eq. 2), with
+// the Jacobians FastSLAM 2.0 and EKF-SLAM need and control-space noise mapped to state noise.
+//
+// Every model has one shape (the `MotionModel` concept below):
+//   predict(s, u, dt)            the noise-free motion h(u, s), heading wrapped to (-pi, pi]
+//   jacobian_pose(s, u, dt)      dh/ds at (s, u)
+//   jacobian_control(s, u, dt)   V = dh/du at (s, u)
+//   pose_noise(s, u, dt, M)      P = V M V^T for a control covariance M (symmetric by construction)
+//   sample(s, u, dt, sigmas, n)  h(u + sigmas .* n, s): the motion under a control perturbed by
+//                                independent normals; `n` points at kControlDim standard normals
+//                                the caller drew (the engine draws them from its keyed random
+//                                streams: models never own a generator). With n = 0 it is predict.
+// `sample` propagates the perturbed control through the nonlinear model (as Bailey's simulator and
+// FastSLAM code do); its spread matches pose_noise to first order in the noise. Note that P is
+// singular whenever the control has fewer dimensions than the state (rank 2 for every model here),
+// so code that needs P must not invert it (engine/proposal.h works in Kalman form for that reason).
+//
+// The models: `BaileyCarModel` (Bailey's simulator), `UnicycleModel` (v, omega),
+// `VictoriaParkModel` (Guivant-Nebot Ackermann car, state = the laser's pose), and
+// `BrownianVelocityModel` (no odometry, paper eq. 79-81, state (x, y, theta, v, omega)).
+// All integrate one explicit Euler step of length dt, as the datasets' reference code does.
+//
+// Ownership: models are small value types (a few doubles). Thread safety: every method is const
+// and pure; one model may be used from any number of threads. Cost: O(1) per call, a handful of
+// sin/cos, no allocation; everything on the hot path is inline.
+#pragma once
+
+#include <cmath>
+#include <concepts>
+
+#include <Eigen/Core>
+
+#include "engine/angles.h"
+#include "engine/pose.h"
+
+namespace fastslam::engine {
+
+// The shape shared by the models (see the file comment). CRTP base: a model provides predict,
+// jacobian_pose and jacobian_control; pose_noise and sample are derived from them.
+template <class Derived, int StateDim, int ControlDim>
+class MotionModelBase {
+ public:
+  static constexpr int kStateDim = StateDim;
+  static constexpr int kControlDim = ControlDim;
+  using State = Eigen::Matrix<double, StateDim, 1>;
+  using Control = Eigen::Matrix<double, ControlDim, 1>;
+  using StateJacobian = Eigen::Matrix<double, StateDim, StateDim>;
+  using ControlJacobian = Eigen::Matrix<double, StateDim, ControlDim>;
+  using StateCovariance = Eigen::Matrix<double, StateDim, StateDim>;
+  using ControlCovariance = Eigen::Matrix<double, ControlDim, ControlDim>;
+
+  // P = V M V^T with V = jacobian_control(s, u, dt). REQUIRES: M symmetric positive semidefinite.
+  StateCovariance pose_noise(const State& s, const Control& u, double dt,
+                             const ControlCovariance& control_cov) const {
+    const ControlJacobian v = self().jacobian_control(s, u, dt);
+    const ControlJacobian vm = v * control_cov;
+    StateCovariance p = vm * v.transpose();
+    return 0.5 * (p + p.transpose());  // exactly symmetric
+  }
+
+  // M = diag(sigmas^2), the control covariance `sample` draws from.
+  static ControlCovariance control_covariance(const Control& sigmas) {
+    return sigmas.cwiseAbs2().asDiagonal();
+  }
+
+  // h(u + sigmas .* n, s) for the kControlDim standard normals at `normals`.
+  // REQUIRES: normals points at kControlDim readable doubles.
+  State sample(const State& s, const Control& u, double dt, const Control& sigmas,
+               const double* normals) const {
+    const Control perturbed = u + sigmas.cwiseProduct(Eigen::Map<const Control>(normals));
+    return self().predict(s, perturbed, dt);
+  }
+
+ private:
+  const Derived& self() const { return static_cast<const Derived&>(*this); }
+};
+
+// A motion model of the common shape.
+template <class M>
+concept MotionModel = requires(const M& m, const typename M::State& s, const typename M::Control& u,
+                               double dt, const typename M::ControlCovariance& cov,
+                               const double* normals) {
+  { m.predict(s, u, dt) } -> std::same_as<typename M::State>;
+  { m.jacobian_pose(s, u, dt) } -> std::same_as<typename M::StateJacobian>;
+  { m.jacobian_control(s, u, dt) } -> std::same_as<typename M::ControlJacobian>;
+  { m.pose_noise(s, u, dt, cov) } -> std::same_as<typename M::StateCovariance>;
+  { m.sample(s, u, dt, u, normals) } -> std::same_as<typename M::State>;
+};
+
+// Bailey's simulator car: control (V, G) = (speed m/s, steering rad, measured from the heading),
+//   x += V dt cos(G + theta), y += V dt sin(G + theta), theta += V dt sin(G) / wheelbase.
+class BaileyCarModel : public MotionModelBase<BaileyCarModel, 3, 2> {
+ public:
+  BaileyCarModel() = default;
+  // Throws std::invalid_argument unless wheelbase is finite and > 0.
+  explicit BaileyCarModel(double wheelbase);
+
+  double wheelbase() const { return wheelbase_; }
+
+  State predict(const State& s, const Control& u, double dt) const {
+    const double vdt = u[0] * dt;
+    const double heading = u[1] + s[2];
+    return {s[0] + vdt * std::cos(heading), s[1] + vdt * std::sin(heading),
+            wrap_angle(s[2] + vdt * std::sin(u[1]) / wheelbase_)};
+  }
+
+  StateJacobian jacobian_pose(const State& s, const Control& u, double dt) const {
+    const double vdt = u[0] * dt;
+    const double heading = u[1] + s[2];
+    StateJacobian j = StateJacobian::Identity();
+    j(0, 2) = -vdt * std::sin(heading);
+    j(1, 2) = vdt * std::cos(heading);
+    return j;
+  }
+
+  ControlJacobian jacobian_control(const State& s, const Control& u, double dt) const {
+    const double vdt = u[0] * dt;
+    const double c = std::cos(u[1] + s[2]);
+    const double sn = std::sin(u[1] + s[2]);
+    ControlJacobian j;
+    j << dt * c, -vdt * sn,  //
+        dt * sn, vdt * c,    //
+        dt * std::sin(u[1]) / wheelbase_, vdt * std::cos(u[1]) / wheelbase_;
+    return j;
+  }
+
+ private:
+  double wheelbase_ = 4.0;  // metres (Bailey's WHEELBASE)
+};
+
+// A unicycle: control (v, omega) = (forward speed m/s, turn rate rad/s); the Euler step of
+// paper eq. 81: x += v dt cos(theta), y += v dt sin(theta), theta += omega dt.
+class UnicycleModel : public MotionModelBase<UnicycleModel, 3, 2> {
+ public:
+  State predict(const State& s, const Control& u, double dt) const {
+    const double vdt = u[0] * dt;
+    return {s[0] + vdt * std::cos(s[2]), s[1] + vdt * std::sin(s[2]), wrap_angle(s[2] + u[1] * dt)};
+  }
+
+  StateJacobian jacobian_pose(const State& s, const Control& u, double dt) const {
+    const double vdt = u[0] * dt;
+    StateJacobian j = StateJacobian::Identity();
+    j(0, 2) = -vdt * std::sin(s[2]);
+    j(1, 2) = vdt * std::cos(s[2]);
+    return j;
+  }
+
+  ControlJacobian jacobian_control(const State& s, const Control& /*u*/, double dt) const {
+    ControlJacobian j;
+    j << dt * std::cos(s[2]), 0.0,  //
+        dt * std::sin(s[2]), 0.0,   //
+        0.0, dt;
+    return j;
+  }
+};
+
+// Geometry of the Victoria Park car (data/victoria_park/README.md, Guivant and Nebot): metres.
+struct VictoriaParkGeometry {
+  double a = 3.78;  // laser ahead of the rear axle
+  double b = 0.50;  // laser to the left of the centre line
+  double l = 2.83;  // wheelbase
+  double h = 0.76;  // encoder wheel (rear left) to the left of the centre line
+};
+
+// The Victoria Park Ackermann car; the state is the LASER point's pose (x, y, phi). Control
+// (ve, alpha) = (rear-left encoder speed m/s, front steering angle rad, + = left):
+//   vc = ve / (1 - tan(alpha) H / L)                     (encoder -> rear-axle centre)
+//   x   += dt (vc cos(phi) - (vc / L) tan(alpha) (a sin(phi) + b cos(phi)))
+//   y   += dt (vc sin(phi) + (vc / L) tan(alpha) (a cos(phi) - b sin(phi)))
+//   phi += dt (vc / L) tan(alpha)
+// REQUIRES: |tan(alpha)| < L / H (about 75 degrees for the defaults) so vc is finite.
+class VictoriaParkModel : public MotionModelBase<VictoriaParkModel, 3, 2> {
+ public:
+  VictoriaParkModel() = default;
+  // Throws std::invalid_argument unless every length is finite, l > 0 and h >= 0.
+  explicit VictoriaParkModel(const VictoriaParkGeometry& geometry);
+
+  const VictoriaParkGeometry& geometry() const { return g_; }
+
+  State predict(const State& s, const Control& u, double dt) const {
+    const double t = std::tan(u[1]);
+    const double vc = u[0] / (1.0 - t * g_.h / g_.l);
+    const double k = vc * t / g_.l;  // phi_dot
+    const double c = std::cos(s[2]);
+    const double sn = std::sin(s[2]);
+    return {s[0] + dt * (vc * c - k * (g_.a * sn + g_.b * c)),
+            s[1] + dt * (vc * sn + k * (g_.a * c - g_.b * sn)), wrap_angle(s[2] + dt * k)};
+  }
+
+  StateJacobian jacobian_pose(const State& s, const Control& u, double dt) const {
+    const double t = std::tan(u[1]);
+    const double vc = u[0] / (1.0 - t * g_.h / g_.l);
+    const double k = vc * t / g_.l;
+    const double c = std::cos(s[2]);
+    const double sn = std::sin(s[2]);
+    StateJacobian j = StateJacobian::Identity();
+    j(0, 2) = dt * (-vc * sn - k * (g_.a * c - g_.b * sn));
+    j(1, 2) = dt * (vc * c - k * (g_.a * sn + g_.b * c));
+    return j;
+  }
+
+  ControlJacobian jacobian_control(const State& s, const Control& u, double dt) const {
+    const double t = std::tan(u[1]);
+    const double sec2 = 1.0 + t * t;
+    const double denom = 1.0 - t * g_.h / g_.l;
+    const double vc = u[0] / denom;
+    // d vc / d(ve, alpha) and d k / d(ve, alpha), with k = vc tan(alpha) / L.
+    const double dvc_dve = 1.0 / denom;
+    const double dvc_dal = u[0] * (g_.h / g_.l) * sec2 / (denom * denom);
+    const double dk_dve = dvc_dve * t / g_.l;
+    const double dk_dal = (dvc_dal * t + vc * sec2) / g_.l;
+    const double c = std::cos(s[2]);
+    const double sn = std::sin(s[2]);
+    const double ex = g_.a * sn + g_.b * c;  // x lever
+    const double ey = g_.a * c - g_.b * sn;  // y lever
+    ControlJacobian j;
+    j << dt * (dvc_dve * c - dk_dve * ex), dt * (dvc_dal * c - dk_dal * ex),   //
+        dt * (dvc_dve * sn + dk_dve * ey), dt * (dvc_dal * sn + dk_dal * ey),  //
+        dt * dk_dve, dt * dk_dal;
+    return j;
+  }
+
+ private:
+  VictoriaParkGeometry g_;
+};
+
+// No odometry (paper section 9.2, eq. 79-81): the state carries the velocities,
+// (x, y, theta, v, omega). The "control" is the velocity increment (dv, domega), nominally zero:
+//   v' = v + dv, omega' = omega + domega                                   (eq. 80)
+//   x += v' cos(theta) dt, y += v' sin(theta) dt, theta += omega' dt       (eq. 81)
+// so sample(s, Control::Zero(), dt, (sigma1, sigma2), n) is exactly eq. 80-81. The sigmas are per
+// step, as in the paper; for a random walk in continuous time pass sigma * sqrt(dt).
+class BrownianVelocityModel : public MotionModelBase<BrownianVelocityModel, 5, 2> {
+ public:
+  State predict(const State& s, const Control& u, double dt) const {
+    const double v = s[3] + u[0];
+    const double w = s[4] + u[1];
+    State out;
+    out << s[0] + v * std::cos(s[2]) * dt, s[1] + v * std::sin(s[2]) * dt,
+        wrap_angle(s[2] + w * dt), v, w;
+    return out;
+  }
+
+  StateJacobian jacobian_pose(const State& s, const Control& u, double dt) const {
+    const double v = s[3] + u[0];
+    const double c = std::cos(s[2]);
+    const double sn = std::sin(s[2]);
+    StateJacobian j = StateJacobian::Identity();
+    j(0, 2) = -v * sn * dt;
+    j(0, 3) = c * dt;
+    j(1, 2) = v * c * dt;
+    j(1, 3) = sn * dt;
+    j(2, 4) = dt;
+    return j;
+  }
+
+  ControlJacobian jacobian_control(const State& s, const Control& /*u*/, double dt) const {
+    ControlJacobian j = ControlJacobian::Zero();
+    j(0, 0) = std::cos(s[2]) * dt;
+    j(1, 0) = std::sin(s[2]) * dt;
+    j(2, 1) = dt;
+    j(3, 0) = 1.0;
+    j(4, 1) = 1.0;
+    return j;
+  }
+};
+
+static_assert(MotionModel<BaileyCarModel>);
+static_assert(MotionModel<UnicycleModel>);
+static_assert(MotionModel<VictoriaParkModel>);
+static_assert(MotionModel<BrownianVelocityModel>);
+
+}  // namespace fastslam::engine

@@ -1,0 +1,214 @@
+// The FastSLAM 2.0 pose proposal and importance weight (paper section 5, eq. 36-61, table 2).
+//
+// For one particle: start from the motion prediction, the Gaussian N(s_hat, P) with
+// s_hat = h(u, s_{t-1}) and P = V M V^T (engine/motion_model.h). Each observation z of a known
+// landmark (mu, Sigma) then refines the Gaussian proposal N(mu_s, Sigma_s):
+//   z_hat = g(mu, mu_s), G_mu, G_s at (mu, mu_s)                               (eq. 36-39)
+//   Q = R + G_mu Sigma G_mu^T                                                 (eq. 42)
+//   Sigma_s' = (G_s^T Q^-1 G_s + Sigma_s^-1)^-1                              (eq. 48)
+//   mu_s'    = Sigma_s' G_s^T Q^-1 (z - z_hat) + mu_s                        (eq. 49)
+// and the refined Gaussian is the prior of the next observation of the scan; the pose is drawn
+// once at the end (`sample_pose`), and every landmark is then updated at the DRAWN pose with the
+// FastSLAM 1.0 update (eq. 53-55, engine/landmark_ekf.h).
+//
+// Where things are evaluated (the choice, made explicit):
+//  * Linearisation: each fold linearises g at the CURRENT proposal mean mu_s (for the first
+//    observation of a scan that is s_hat, exactly eq. 36-39). Re-linearising at the refined mean
+//    is what Bailey's fastslam2 does and is more accurate than keeping s_hat for every
+//    observation once the first one has moved the mean.
+//  * Form: eq. 48-49 are computed in the equivalent Kalman form (matrix inversion lemma):
+//      L = G_s Sigma_s G_s^T + Q,  K = Sigma_s G_s^T L^-1,  mu_s' = mu_s + K v,
+//      Sigma_s' = (I - K G_s) Sigma_s (I - K G_s)^T + K Q K^T   (Joseph form, stays PSD)
+//    because P is singular whenever the control has fewer dimensions than the pose (rank 2 for
+//    all our car models), so eq. 48's P^-1 does not exist; only 2x2 matrices are inverted.
+//  * Weight: the term of one observation is ln N(v; 0, L) with L = G_s Sigma_s G_s^T + Q at the
+//    current proposal. For the first fold of a scan (mu_s = s_hat, Sigma_s = P) that is exactly
+//    eq. 60-61 (`log_weight`, z_hat and Jacobians at s_hat). Summing the terms over the folds of a
+//    scan gives, by the chain rule, the joint likelihood p(z_1..z_k | s_{t-1}, u, map) under the
+//    linearisation, which is the principled extension of eq. 61 to several observations.
+//  * Data association (table 2): `evaluate_proposal` computes every term for a candidate landmark
+//    without changing anything; its log_likelihood (the pose integrated out) scores the
+//    candidate, and table 2's alternative (draw a pose from the folded proposal, then score with
+//    Q) is built from the same pieces. `fold` then folds the chosen one.
+//
+// State dimension N: the pose is (x, y, theta) (N = 3); (x, y, theta, v, omega) for the
+// no-odometry model (N = 5, the extra columns of G_s are zero); (x, y) for LG-SLAM (N = 2,
+// engine/lg_slam.h). Component 2 is the heading, wrapped to (-pi, pi], when N >= 3.
+//
+// Ownership: values in, values out. Thread safety: pure functions. Cost: O(N^2) flops on fixed-size
+// matrices, one 2x2 inversion and one log per observation; no allocation, all inline.
+#pragma once
+
+#include <cmath>
+
+#include <Eigen/Core>
+
+#include "engine/angles.h"
+#include "engine/landmark_ekf.h"
+#include "engine/measurement_model.h"
+
+namespace fastslam::engine {
+
+// The index of the heading in a state of N components, or -1 (LG-SLAM positions).
+template <int N>
+inline constexpr int kHeadingIndex = N >= 3 ? 2 : -1;
+
+// A Gaussian over the state: the proposal N(mu_s, Sigma_s), or the motion prior N(s_hat, P).
+template <int N>
+struct PoseGaussian {
+  Eigen::Matrix<double, N, 1> mean = Eigen::Matrix<double, N, 1>::Zero();
+  Eigen::Matrix<double, N, N> cov = Eigen::Matrix<double, N, N>::Zero();
+};
+using PoseProposal = PoseGaussian<3>;
+
+// One observation of one landmark against the current proposal; nothing is modified.
+template <int N>
+struct ProposalObservation {
+  Eigen::Vector2d z_hat;               // g(mu, mu_s)
+  Eigen::Vector2d innovation;          // v = z - z_hat, bearing wrapped
+  Eigen::Matrix2d g_landmark;          // G_mu at (mu, mu_s)
+  Eigen::Matrix<double, 2, N> g_pose;  // G_s at (mu, mu_s)
+  Eigen::Matrix2d q;                   // Q = R + G_mu Sigma G_mu^T (eq. 42)
+  Eigen::Matrix2d l;                   // L = G_s Sigma_s G_s^T + Q (eq. 60 at Sigma_s)
+  Eigen::Matrix2d l_inv;               // L^-1
+  double log_det_l = 0.0;              // ln det L
+  double mahalanobis2 = 0.0;           // v^T L^-1 v
+  double log_likelihood = 0.0;         // ln N(v; 0, L) (eq. 61 at the current proposal)
+};
+
+// Core: the terms from a linearisation at (mu, mu_s) and the wrapped innovation.
+// REQUIRES: landmark_cov and proposal.cov symmetric PSD, r symmetric positive definite.
+template <int N>
+inline ProposalObservation<N> evaluate_proposal(const MeasurementLinearization<N>& lin,
+                                                const Eigen::Vector2d& innovation,
+                                                const Eigen::Matrix2d& landmark_cov,
+                                                const PoseGaussian<N>& proposal,
+                                                const Eigen::Matrix2d& r) {
+  ProposalObservation<N> out;
+  out.z_hat = lin.z_hat;
+  out.innovation = innovation;
+  out.g_landmark = lin.g_landmark;
+  out.g_pose = lin.g_pose;
+  Eigen::Matrix2d q = lin.g_landmark * landmark_cov * lin.g_landmark.transpose() + r;
+  q(0, 1) = q(1, 0) = 0.5 * (q(0, 1) + q(1, 0));
+  out.q = q;
+  const Eigen::Matrix<double, 2, N> gp = lin.g_pose * proposal.cov;
+  Eigen::Matrix2d l = gp * lin.g_pose.transpose() + q;
+  l(0, 1) = l(1, 0) = 0.5 * (l(0, 1) + l(1, 0));
+  out.l = l;
+  const SymmetricInverse2 inv = invert_symmetric2(l);
+  out.l_inv = inv.inverse;
+  out.log_det_l = inv.log_det;
+  out.mahalanobis2 = innovation.dot(inv.inverse * innovation);
+  out.log_likelihood = gaussian_log_density2(out.mahalanobis2, inv.log_det);
+  return out;
+}
+
+// `model.linearize` for the model's own pose, `linearize_state<N>` for a longer state.
+template <int N, MeasurementModel Model>
+inline MeasurementLinearization<N> linearize_for(const Model& model,
+                                                 const Eigen::Vector2d& landmark,
+                                                 const Eigen::Matrix<double, N, 1>& state) {
+  if constexpr (N == Model::kPoseDim) {
+    return model.linearize(landmark, state);
+  } else {
+    return model.template linearize_state<N>(landmark, state);
+  }
+}
+
+// The terms of observation z of landmark `lm` against `proposal`, linearised at its mean.
+template <int N, MeasurementModel Model>
+inline ProposalObservation<N> evaluate_proposal(const Model& model, const LandmarkGaussian& lm,
+                                                const PoseGaussian<N>& proposal,
+                                                const Eigen::Vector2d& z,
+                                                const Eigen::Matrix2d& r) {
+  const MeasurementLinearization<N> lin = linearize_for<N>(model, lm.mean, proposal.mean);
+  return evaluate_proposal<N>(lin, Model::innovation(z, lin.z_hat), lm.cov, proposal, r);
+}
+
+// The proposal refined by one observation (eq. 48-49, Kalman form; see the file comment).
+// `obs` must have been evaluated against this very proposal.
+template <int N>
+inline PoseGaussian<N> fold(const PoseGaussian<N>& proposal, const ProposalObservation<N>& obs) {
+  using Gain = Eigen::Matrix<double, N, 2>;
+  using Square = Eigen::Matrix<double, N, N>;
+  const Gain k = proposal.cov * obs.g_pose.transpose() * obs.l_inv;  // K = Sigma_s G_s^T L^-1
+  PoseGaussian<N> out;
+  out.mean = proposal.mean + k * obs.innovation;
+  if constexpr (kHeadingIndex<N> >= 0) {
+    out.mean[kHeadingIndex<N>] = wrap_angle(out.mean[kHeadingIndex<N>]);
+  }
+  const Square a = Square::Identity() - k * obs.g_pose;
+  const Square cov = a * proposal.cov * a.transpose() + k * obs.q * k.transpose();
+  out.cov = 0.5 * (cov + cov.transpose());
+  return out;
+}
+
+// Evaluate and fold in one call; returns the observation's log-likelihood term through
+// `log_likelihood` (may be null).
+template <int N, MeasurementModel Model>
+inline PoseGaussian<N> fold_observation(const Model& model, const PoseGaussian<N>& proposal,
+                                        const LandmarkGaussian& lm, const Eigen::Vector2d& z,
+                                        const Eigen::Matrix2d& r,
+                                        double* log_likelihood = nullptr) {
+  const ProposalObservation<N> obs = evaluate_proposal<N>(model, lm, proposal, z, r);
+  if (log_likelihood != nullptr) {
+    *log_likelihood = obs.log_likelihood;
+  }
+  return fold<N>(proposal, obs);
+}
+
+// The importance weight term of eq. 60-61 for one observation, in log space:
+// ln N(z - g(mu, s_hat); 0, L), L = G_s P G_s^T + G_mu Sigma G_mu^T + R, all at s_hat.
+template <int N, MeasurementModel Model>
+inline double log_weight(const Model& model, const LandmarkGaussian& lm,
+                         const PoseGaussian<N>& motion_prior, const Eigen::Vector2d& z,
+                         const Eigen::Matrix2d& r) {
+  return evaluate_proposal<N>(model, lm, motion_prior, z, r).log_likelihood;
+}
+
+// A lower-triangular factor F with F F^T = cov for a symmetric positive SEMIdefinite cov: a
+// Cholesky factorisation whose pivots at or below a relative threshold (rounding noise of a
+// singular matrix, such as a rank-2 P) give zero columns. O(N^3 / 6), no allocation.
+template <int N>
+inline Eigen::Matrix<double, N, N> psd_factor(const Eigen::Matrix<double, N, N>& cov) {
+  Eigen::Matrix<double, N, N> f = Eigen::Matrix<double, N, N>::Zero();
+  const double scale = cov.diagonal().cwiseAbs().maxCoeff();
+  const double threshold = 64.0 * N * 2.220446049250313e-16 * scale;
+  for (int j = 0; j < N; ++j) {
+    double d = cov(j, j);
+    for (int k = 0; k < j; ++k) {
+      d -= f(j, k) * f(j, k);
+    }
+    if (!(d > threshold)) {
+      continue;  // column j stays zero
+    }
+    const double root = std::sqrt(d);
+    f(j, j) = root;
+    for (int i = j + 1; i < N; ++i) {
+      double e = cov(i, j);
+      for (int k = 0; k < j; ++k) {
+        e -= f(i, k) * f(j, k);
+      }
+      f(i, j) = e / root;
+    }
+  }
+  return f;
+}
+
+// A draw from N(mean, cov) given N standard normals at `normals` (the caller's random stream):
+// mean + F n with F = psd_factor(cov), heading wrapped. With normals = 0 it is the mean.
+// REQUIRES: normals points at N readable doubles.
+template <int N>
+inline Eigen::Matrix<double, N, 1> sample_pose(const PoseGaussian<N>& proposal,
+                                               const double* normals) {
+  Eigen::Matrix<double, N, 1> s =
+      proposal.mean +
+      psd_factor<N>(proposal.cov) * Eigen::Map<const Eigen::Matrix<double, N, 1>>(normals);
+  if constexpr (kHeadingIndex<N> >= 0) {
+    s[kHeadingIndex<N>] = wrap_angle(s[kHeadingIndex<N>]);
+  }
+  return s;
+}
+
+}  // namespace fastslam::engine
