@@ -1,0 +1,607 @@
+#include "engine/filter.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <istream>
+#include <limits>
+#include <ostream>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include <Eigen/Core>
+#include <oneapi/tbb/combinable.h>
+
+#include "engine/landmark_ekf.h"
+#include "engine/measurement_model.h"
+#include "engine/motion_model.h"
+#include "engine/proposal.h"
+#include "memory/node_heap.h"
+#include "parallel/particle_kernel.h"
+#include "parallel/random_stream.h"
+#include "parallel/resample.h"
+
+namespace fastslam::engine {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+
+// A queued odometry sample, with the step number that keys its random draws.
+struct PendingControl {
+  double u0 = 0.0;
+  double u1 = 0.0;
+  double dt = 0.0;
+  std::uint64_t step = 0;
+};
+
+// One observation of a scan as every particle will process it (known association): the
+// measurement, the map slot of its landmark, and whether the scan creates that landmark.
+struct PlannedObservation {
+  Eigen::Vector2d z;
+  memory::Slot slot = 0;
+  std::uint64_t id = 0;
+  bool is_new = false;
+};
+
+struct PhaseTimes {
+  double predict = 0.0;
+  double update = 0.0;
+};
+
+}  // namespace
+
+struct Filter::Impl {
+  explicit Impl(const FilterConfig& c)
+      : config(checked(c)),
+        kernel({c.threads, c.grain}),
+        resampler(c.resample, kernel),
+        store(c.particles, heap),
+        pose_cov(static_cast<std::size_t>(c.particles) * 25, 0.0),
+        sensor(c.sensor.offset) {
+    r << c.sensor.sigma_range * c.sensor.sigma_range, 0, 0,
+        c.sensor.sigma_bearing * c.sensor.sigma_bearing;
+    const double log_m = -std::log(static_cast<double>(c.particles));
+    double* columns[5] = {store.x().data(), store.y().data(), store.theta().data(),
+                          store.v().data(), store.omega().data()};
+    for (std::uint32_t i = 0; i < c.particles; ++i) {
+      for (int k = 0; k < 5; ++k) columns[k][i] = c.initial_pose[k];
+      store.log_weight()[i] = log_m;
+    }
+  }
+
+  static const FilterConfig& checked(const FilterConfig& c) {
+    validate(c);
+    return c;
+  }
+
+  // Runs the queued controls and, if given, the planned scan through every particle.
+  void run_pass(const std::vector<PlannedObservation>* scan, std::uint64_t scan_step) {
+    switch (config.motion.kind) {
+      case MotionKind::kBaileyCar:
+        run_pass_with(BaileyCarModel(config.motion.wheelbase), scan, scan_step);
+        break;
+      case MotionKind::kUnicycle:
+        run_pass_with(UnicycleModel(), scan, scan_step);
+        break;
+      case MotionKind::kVictoriaPark:
+        run_pass_with(VictoriaParkModel(config.motion.geometry), scan, scan_step);
+        break;
+      case MotionKind::kBrownian:
+        run_pass_with(BrownianVelocityModel(), scan, scan_step);
+        break;
+    }
+    pending.clear();
+  }
+
+  template <class Motion>
+  void run_pass_with(const Motion& motion, const std::vector<PlannedObservation>* scan,
+                     std::uint64_t scan_step) {
+    constexpr int N = Motion::kStateDim;
+    using State = typename Motion::State;
+    using Cov = Eigen::Matrix<double, N, N>;
+    const typename Motion::Control sigmas(config.motion.sigma_control[0],
+                                          config.motion.sigma_control[1]);
+    const typename Motion::ControlCovariance control_cov = Motion::control_covariance(sigmas);
+    const bool fs2 = config.algorithm == Algorithm::kFastSlam2;
+    const std::uint64_t seed = config.seed;
+    double* col[5] = {store.x().data(), store.y().data(), store.theta().data(), store.v().data(),
+                      store.omega().data()};
+    double* log_weight = store.log_weight().data();
+
+    auto load = [&](std::size_t i) {
+      State s;
+      for (int k = 0; k < N; ++k) s[k] = col[k][i];
+      return s;
+    };
+    auto save = [&](std::size_t i, const State& s) {
+      for (int k = 0; k < N; ++k) col[k][i] = s[k];
+    };
+    auto cov_of = [&](std::size_t i) { return Eigen::Map<Cov>(&pose_cov[i * 25]); };
+    const std::size_t m = store.size();
+    const bool record = config.record_trajectory && !pending.empty();
+    if (record) {
+      recorded.assign(pending.size() * m * 4, 0.0);
+      snapshot_weights();
+    }
+    auto remember = [&](std::size_t k, std::size_t i, const State& s) {
+      double* out = &recorded[(k * m + i) * 4];
+      out[0] = s[0];
+      out[1] = s[1];
+      out[2] = std::cos(s[2]);
+      out[3] = std::sin(s[2]);
+    };
+
+    kernel.for_each_block(store.size(), [&](std::size_t begin, std::size_t end) {
+      const Clock::time_point t0 = Clock::now();
+      const std::size_t count = end - begin;
+      // Controls: one batch of normals per control for the whole block (vectorised), then the
+      // motion of each particle.
+      thread_local std::vector<double> normals;
+      for (std::size_t k = 0; k < pending.size(); ++k) {
+        const PendingControl& c = pending[k];
+        typename Motion::Control u(c.u0, c.u1);
+        if constexpr (std::is_same_v<Motion, BrownianVelocityModel>) u.setZero();
+        if (!fs2) {
+          normals.resize(2 * count);
+          parallel::normals_for_particles(seed, c.step, parallel::Purpose::kMotion,
+                                          static_cast<std::uint32_t>(begin), count, 2, normals);
+          for (std::size_t i = begin; i < end; ++i) {
+            const State next = motion.sample(load(i), u, c.dt, sigmas, &normals[2 * (i - begin)]);
+            save(i, next);
+            if (record) remember(k, i, next);
+          }
+        } else {
+          for (std::size_t i = begin; i < end; ++i) {
+            const State s = load(i);
+            auto p = cov_of(i);
+            const Cov j = motion.jacobian_pose(s, u, c.dt);
+            Cov next = j * p * j.transpose() + motion.pose_noise(s, u, c.dt, control_cov);
+            p = 0.5 * (next + next.transpose());
+            const State mean = motion.predict(s, u, c.dt);
+            save(i, mean);
+            if (record) remember(k, i, mean);
+          }
+        }
+      }
+      const Clock::time_point t1 = Clock::now();
+      if (scan != nullptr) {
+        for (std::size_t i = begin; i < end; ++i) {
+          update_particle<Motion>(i, load(i), *scan, scan_step, fs2, log_weight, save, cov_of);
+        }
+      }
+      const Clock::time_point t2 = Clock::now();
+      PhaseTimes& times = phase_times.local();
+      times.predict += seconds_between(t0, t1);
+      times.update += seconds_between(t1, t2);
+    });
+    if (record) reduce_recorded(m);
+  }
+
+  // w_i = exp(l_i - max l): the weights the recorded poses are averaged with.
+  void snapshot_weights() {
+    std::span<const double> lw = store.log_weight();
+    const double max_lw = *std::max_element(lw.begin(), lw.end());
+    weights.resize(lw.size());
+    for (std::size_t i = 0; i < lw.size(); ++i) weights[i] = std::exp(lw[i] - max_lw);
+  }
+
+  // The weighted mean of the recorded poses, per control, in fixed blocks folded in order.
+  void reduce_recorded(std::size_t m) {
+    using Sums = std::array<double, 5>;
+    for (std::size_t k = 0; k < pending.size(); ++k) {
+      const double* rec = &recorded[k * m * 4];
+      const Sums sums = kernel.reduce(
+          m, Sums{},
+          [&](std::size_t begin, std::size_t end) {
+            Sums part{};
+            for (std::size_t i = begin; i < end; ++i) {
+              const double w = weights[i];
+              part[0] += w;
+              for (int c = 0; c < 4; ++c) part[c + 1] += w * rec[i * 4 + c];
+            }
+            return part;
+          },
+          [](const Sums& a, const Sums& b) {
+            return Sums{a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3], a[4] + b[4]};
+          });
+      trajectory.push_back({controls - pending.size() + k, sums[1] / sums[0], sums[2] / sums[0],
+                            std::atan2(sums[4], sums[3])});
+    }
+  }
+
+  // The scan of one particle: FastSLAM 1.0 updates each observed landmark at the particle's
+  // pose; 2.0 folds the observations into the proposal, draws the pose, then updates.
+  template <class Motion, class Save, class CovOf>
+  void update_particle(std::size_t i, typename Motion::State s,
+                       const std::vector<PlannedObservation>& scan, std::uint64_t scan_step,
+                       bool fs2, double* log_weight, const Save& save, const CovOf& cov_of) {
+    constexpr int N = Motion::kStateDim;
+    memory::LandmarkTree& map = store.map(i);
+    double log_w = 0.0;
+    if (fs2) {
+      PoseGaussian<N> proposal;
+      proposal.mean = s;
+      proposal.cov = cov_of(i);
+      for (const PlannedObservation& o : scan) {
+        if (o.is_new) continue;
+        const LandmarkGaussian lm = to_gaussian(map.at(o.slot));
+        const ProposalObservation<N> terms = evaluate_proposal<N>(sensor, lm, proposal, o.z, r);
+        log_w += terms.log_likelihood;
+        proposal = fold<N>(proposal, terms);
+      }
+      double normals[N];
+      parallel::RandomStream stream(
+          {config.seed, scan_step, static_cast<std::uint32_t>(i), parallel::Purpose::kProposal});
+      stream.fill_normal(std::span<double>(normals, N));
+      s = sample_pose<N>(proposal, normals);
+      cov_of(i).setZero();
+      save(i, s);
+    }
+    const Pose pose = s.template head<3>();
+    for (const PlannedObservation& o : scan) {
+      if (o.is_new) {
+        const LandmarkGaussian lm = initialize_landmark(sensor, pose, o.z, r);
+        memory::Landmark stored;
+        store_gaussian(lm, stored);
+        stored.log_odds = config.existence.initial;
+        stored.id = o.id;
+        stored.last_seen = static_cast<std::int64_t>(scan_step);
+        map.insert(stored);
+        continue;
+      }
+      memory::Landmark& stored = map.edit(o.slot);
+      LandmarkGaussian lm = to_gaussian(stored);
+      const LandmarkObservation terms = evaluate_observation(sensor, lm, pose, o.z, r);
+      if (!fs2) log_w += terms.log_likelihood;
+      apply_update(lm, terms, r);
+      store_gaussian(lm, stored);
+      stored.log_odds += config.existence.seen;
+      stored.last_seen = static_cast<std::int64_t>(scan_step);
+    }
+    log_weight[i] += log_w;
+  }
+
+  void resample(std::uint64_t scan_step) {
+    const Clock::time_point t0 = Clock::now();
+    try {
+      const parallel::ResampleOutcome outcome = resampler.resample(store, config.seed, scan_step);
+      resamples += outcome.resampled ? 1 : 0;
+    } catch (const std::domain_error&) {
+      // Every weight is zero: the scan was impossible under every particle. The maps already
+      // hold it; start the weights afresh rather than stop (counted in the statistics).
+      parallel::reset_log_weights(store.log_weight(), kernel);
+      ++weight_resets;
+    }
+    resample_seconds += seconds_between(t0, Clock::now());
+  }
+
+  FilterConfig config;
+  memory::PoolHeap heap;  // before the store: outlives every map
+  parallel::ParticleKernel kernel;
+  parallel::Resampler resampler;
+  memory::ParticleStore store;
+  std::vector<double> pose_cov;  // FastSLAM 2.0: motion covariance since the last scan, N x N
+  RangeBearingModel sensor;
+  Eigen::Matrix2d r;
+  std::vector<PendingControl> pending;
+  std::vector<double> recorded;  // x, y, cos, sin per control per particle (record_trajectory)
+  std::vector<double> weights;
+  std::vector<TrajectoryPoint> trajectory;
+  std::unordered_map<std::int64_t, memory::Slot> known_slots;
+  std::uint64_t step = 0;  // events so far (controls and scans): keys the random streams
+  std::uint64_t controls = 0, scans = 0, observations = 0, resamples = 0, weight_resets = 0;
+  double resample_seconds = 0.0;
+  double observe_wall_seconds = 0.0;
+  mutable tbb::combinable<PhaseTimes> phase_times;  // combine_each is not const
+};
+
+Filter::Filter(const FilterConfig& config) : impl_(std::make_unique<Impl>(config)) {}
+Filter::Filter(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Filter::~Filter() = default;
+
+const FilterConfig& Filter::config() const noexcept { return impl_->config; }
+
+void Filter::predict(const Control& control, double dt) {
+  if (!std::isfinite(dt) || dt < 0) {
+    throw std::invalid_argument("Filter::predict: dt must be finite and >= 0 (got " +
+                                std::to_string(dt) + ")");
+  }
+  if (!std::isfinite(control.u0) || !std::isfinite(control.u1)) {
+    throw std::invalid_argument("Filter::predict: control values must be finite (got " +
+                                std::to_string(control.u0) + ", " + std::to_string(control.u1) +
+                                ")");
+  }
+  impl_->pending.push_back({control.u0, control.u1, dt, impl_->step});
+  ++impl_->step;
+  ++impl_->controls;
+}
+
+void Filter::observe(std::span<const Observation> scan) {
+  Impl& s = *impl_;
+  // Validate and plan everything before changing anything.
+  std::vector<PlannedObservation> plan;
+  plan.reserve(scan.size());
+  std::unordered_map<std::int64_t, memory::Slot> new_slots;
+  std::unordered_set<std::int64_t> ids_in_scan;
+  memory::Slot next_slot = static_cast<memory::Slot>(s.known_slots.size());
+  for (std::size_t j = 0; j < scan.size(); ++j) {
+    const Observation& o = scan[j];
+    const std::string where = "Filter::observe: observation " + std::to_string(j) + ": ";
+    if (!std::isfinite(o.range) || !(o.range > 0)) {
+      throw std::invalid_argument(where + "range must be finite and > 0 (got " +
+                                  std::to_string(o.range) + ")");
+    }
+    if (!std::isfinite(o.bearing)) {
+      throw std::invalid_argument(where + "bearing must be finite (got " +
+                                  std::to_string(o.bearing) + ")");
+    }
+    if (o.id < 0) {
+      throw std::invalid_argument(where + "known association needs a landmark id >= 0 (got " +
+                                  std::to_string(o.id) + ")");
+    }
+    if (!ids_in_scan.insert(o.id).second) {
+      throw std::invalid_argument(where + "landmark id " + std::to_string(o.id) +
+                                  " appears twice in one scan");
+    }
+    PlannedObservation p;
+    p.z = {o.range, wrap_angle(o.bearing)};
+    p.id = static_cast<std::uint64_t>(o.id);
+    if (auto found = s.known_slots.find(o.id); found != s.known_slots.end()) {
+      p.slot = found->second;
+    } else {
+      p.slot = next_slot++;
+      p.is_new = true;
+      new_slots.emplace(o.id, p.slot);
+    }
+    plan.push_back(p);
+  }
+  const Clock::time_point t0 = Clock::now();
+  const std::uint64_t scan_step = s.step;
+  s.run_pass(&plan, scan_step);
+  s.known_slots.merge(new_slots);
+  ++s.step;
+  ++s.scans;
+  s.observations += scan.size();
+  s.resample(scan_step);
+  s.observe_wall_seconds += seconds_between(t0, Clock::now());
+}
+
+Estimate Filter::estimate() {
+  Impl& s = *impl_;
+  if (!s.pending.empty()) s.run_pass(nullptr, 0);
+  const memory::ParticleStore& store = s.store;
+  const std::size_t m = store.size();
+  Estimate e;
+  std::span<const double> lw = store.log_weight();
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < m; ++i) {
+    if (lw[i] > lw[best]) best = i;
+  }
+  const double max_lw = lw[best];
+  // Weighted sums over fixed blocks, folded in order: deterministic for any thread count.
+  struct Sums {
+    double w = 0, w2 = 0, x = 0, y = 0, c = 0, sn = 0, v = 0, omega = 0;
+  };
+  const Sums sums = s.kernel.reduce(
+      m, Sums{},
+      [&](std::size_t begin, std::size_t end) {
+        Sums part;
+        for (std::size_t i = begin; i < end; ++i) {
+          const double w = std::exp(lw[i] - max_lw);
+          part.w += w;
+          part.w2 += w * w;
+          part.x += w * store.x()[i];
+          part.y += w * store.y()[i];
+          part.c += w * std::cos(store.theta()[i]);
+          part.sn += w * std::sin(store.theta()[i]);
+          part.v += w * store.v()[i];
+          part.omega += w * store.omega()[i];
+        }
+        return part;
+      },
+      [](const Sums& a, const Sums& b) {
+        return Sums{a.w + b.w, a.w2 + b.w2, a.x + b.x, a.y + b.y,
+                    a.c + b.c, a.sn + b.sn, a.v + b.v, a.omega + b.omega};
+      });
+  e.mean_pose[0] = sums.x / sums.w;
+  e.mean_pose[1] = sums.y / sums.w;
+  e.mean_pose[2] = std::atan2(sums.sn, sums.c);
+  e.mean_pose[3] = sums.v / sums.w;
+  e.mean_pose[4] = sums.omega / sums.w;
+  e.effective_sample_size = sums.w * sums.w / sums.w2;
+  e.best_particle = static_cast<std::uint32_t>(best);
+  const double best_pose[5] = {store.x()[best], store.y()[best], store.theta()[best],
+                               store.v()[best], store.omega()[best]};
+  std::copy(std::begin(best_pose), std::end(best_pose), e.best_pose);
+  const memory::LandmarkTree& map = store.map(best);
+  e.map.reserve(map.size());
+  for (const auto [slot, lm] : map) {
+    e.map.push_back({slot, lm.id, lm.x, lm.y, lm.sxx, lm.sxy, lm.syy, lm.log_odds, lm.last_seen});
+  }
+  return e;
+}
+
+FilterStatistics Filter::statistics() const {
+  const Impl& s = *impl_;
+  FilterStatistics st;
+  st.controls = s.controls;
+  st.scans = s.scans;
+  st.observations = s.observations;
+  st.resamples = s.resamples;
+  st.weight_resets = s.weight_resets;
+  s.phase_times.combine_each([&](const PhaseTimes& t) {
+    st.predict_seconds += t.predict;
+    st.update_seconds += t.update;
+  });
+  st.resample_seconds = s.resample_seconds;
+  st.observe_wall_seconds = s.observe_wall_seconds;
+  const memory::HeapStats heap = s.heap.stats();
+  st.live_nodes = heap.live_nodes;
+  st.live_bytes = heap.live_bytes;
+  return st;
+}
+
+std::vector<TrajectoryPoint> Filter::take_trajectory() {
+  if (!impl_->pending.empty()) impl_->run_pass(nullptr, 0);
+  std::vector<TrajectoryPoint> out;
+  out.swap(impl_->trajectory);
+  return out;
+}
+
+const memory::ParticleStore& Filter::particles() {
+  if (!impl_->pending.empty()) impl_->run_pass(nullptr, 0);
+  return impl_->store;
+}
+
+// ---- save / load ----------------------------------------------------------------------------
+// Format (native byte order, for the same build): magic, version, sizeof(FilterConfig), the
+// config bytes, counters, queued controls, known-id table, FastSLAM 2.0 covariances, particle
+// columns, then per particle either "same map as particle i-1" or its landmarks (slot, value).
+
+namespace {
+
+constexpr char kMagic[8] = {'F', 'S', 'L', 'A', 'M', 'S', 'T', '1'};
+
+template <class T>
+void put(std::ostream& out, const T& value) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  out.write(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+
+template <class T>
+void put_vector(std::ostream& out, const std::vector<T>& values) {
+  put<std::uint64_t>(out, values.size());
+  out.write(reinterpret_cast<const char*>(values.data()),
+            static_cast<std::streamsize>(values.size() * sizeof(T)));
+}
+
+template <class T>
+T get(std::istream& in) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  T value;
+  in.read(reinterpret_cast<char*>(&value), sizeof(T));
+  if (!in) throw std::runtime_error("Filter::load: truncated or unreadable state");
+  return value;
+}
+
+template <class T>
+std::vector<T> get_vector(std::istream& in, std::uint64_t limit) {
+  const auto n = get<std::uint64_t>(in);
+  if (n > limit) throw std::runtime_error("Filter::load: corrupt state (a length is too large)");
+  std::vector<T> values(n);
+  in.read(reinterpret_cast<char*>(values.data()), static_cast<std::streamsize>(n * sizeof(T)));
+  if (!in) throw std::runtime_error("Filter::load: truncated or unreadable state");
+  return values;
+}
+
+}  // namespace
+
+void Filter::save(std::ostream& out) const {
+  const Impl& s = *impl_;
+  static_assert(std::is_trivially_copyable_v<FilterConfig>);
+  out.write(kMagic, sizeof(kMagic));
+  put<std::uint32_t>(out, 1);
+  put<std::uint64_t>(out, sizeof(FilterConfig));
+  put(out, s.config);
+  for (std::uint64_t v : {s.step, s.controls, s.scans, s.observations, s.resamples,
+                          s.weight_resets}) {
+    put(out, v);
+  }
+  put_vector(out, s.pending);
+  put_vector(out, s.trajectory);
+  std::vector<std::pair<std::int64_t, memory::Slot>> known(s.known_slots.begin(),
+                                                           s.known_slots.end());
+  std::sort(known.begin(), known.end());
+  put_vector(out, known);
+  put_vector(out, s.pose_cov);
+  const memory::ParticleStore& store = s.store;
+  for (std::span<const double> column : {store.x(), store.y(), store.theta(), store.v(),
+                                         store.omega(), store.log_weight()}) {
+    out.write(reinterpret_cast<const char*>(column.data()),
+              static_cast<std::streamsize>(column.size() * sizeof(double)));
+  }
+  for (std::size_t i = 0; i < store.size(); ++i) {
+    const bool same = i > 0 && store.map(i).shares_root_with(store.map(i - 1));
+    put<std::uint8_t>(out, same ? 1 : 0);
+    if (same) continue;
+    put<std::uint64_t>(out, store.map(i).size());
+    for (const auto [slot, lm] : store.map(i)) {
+      put(out, slot);
+      put(out, lm);
+    }
+  }
+  if (!out) throw std::runtime_error("Filter::save: write failed");
+}
+
+std::unique_ptr<Filter> Filter::load(std::istream& in) {
+  char magic[sizeof(kMagic)];
+  in.read(magic, sizeof(magic));
+  if (!in || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0) {
+    throw std::runtime_error("Filter::load: not a fastslam filter state (bad magic)");
+  }
+  if (get<std::uint32_t>(in) != 1) throw std::runtime_error("Filter::load: unknown version");
+  if (get<std::uint64_t>(in) != sizeof(FilterConfig)) {
+    throw std::runtime_error("Filter::load: state written by an incompatible build");
+  }
+  const auto config = get<FilterConfig>(in);
+  auto impl = std::make_unique<Impl>(config);  // validates the config
+  Impl& s = *impl;
+  s.step = get<std::uint64_t>(in);
+  s.controls = get<std::uint64_t>(in);
+  s.scans = get<std::uint64_t>(in);
+  s.observations = get<std::uint64_t>(in);
+  s.resamples = get<std::uint64_t>(in);
+  s.weight_resets = get<std::uint64_t>(in);
+  constexpr std::uint64_t kLimit = std::uint64_t{1} << 34;
+  s.pending = get_vector<PendingControl>(in, kLimit);
+  s.trajectory = get_vector<TrajectoryPoint>(in, kLimit);
+  for (const auto& [id, slot] : get_vector<std::pair<std::int64_t, memory::Slot>>(in, kLimit)) {
+    s.known_slots.emplace(id, slot);
+  }
+  s.pose_cov = get_vector<double>(in, kLimit);
+  if (s.pose_cov.size() != std::size_t{config.particles} * 25) {
+    throw std::runtime_error("Filter::load: corrupt state (covariance block size)");
+  }
+  memory::ParticleStore& store = s.store;
+  for (std::span<double> column : {store.x(), store.y(), store.theta(), store.v(), store.omega(),
+                                   store.log_weight()}) {
+    in.read(reinterpret_cast<char*>(column.data()),
+            static_cast<std::streamsize>(column.size() * sizeof(double)));
+    if (!in) throw std::runtime_error("Filter::load: truncated or unreadable state");
+  }
+  for (std::size_t i = 0; i < store.size(); ++i) {
+    if (get<std::uint8_t>(in) == 1) {
+      if (i == 0) throw std::runtime_error("Filter::load: corrupt state (map sharing)");
+      store.map(i) = store.map(i - 1);
+      continue;
+    }
+    // Rebuild with the same slots: inserting in slot order takes the lowest free slot, so
+    // placeholders fill the holes and are erased afterwards.
+    memory::LandmarkTree& map = store.map(i);
+    const auto count = get<std::uint64_t>(in);
+    std::vector<memory::Slot> holes;
+    for (std::uint64_t k = 0; k < count; ++k) {
+      const auto slot = get<memory::Slot>(in);
+      const auto lm = get<memory::Landmark>(in);
+      while (map.size() < slot) holes.push_back(map.insert({}));
+      if (map.size() != slot) {
+        throw std::runtime_error("Filter::load: corrupt state (slots out of order)");
+      }
+      map.insert(lm);
+    }
+    for (memory::Slot hole : holes) map.erase(hole);
+  }
+  return std::unique_ptr<Filter>(new Filter(std::move(impl)));
+}
+
+}  // namespace fastslam::engine

@@ -1,0 +1,140 @@
+// The Filter API that embedders call: FastSLAM 1.0 (paper section 4, table 1) and 2.0 (section
+// 5, table 2) over M particles, each with its own persistent map (memory/landmark_tree.h).
+//
+// Use: construct from a `FilterConfig`; feed it `predict(control, dt)` for every odometry
+// sample and `observe(scan)` for every scan, in time order; read `estimate()` (the weighted-mean
+// and best pose, and the best particle's map with covariances) and `statistics()` whenever you
+// like; `save` and `load` the whole state (a restored filter continues bit-identically).
+//
+// How a step runs. `predict` validates the control and queues it; `observe` then runs ONE
+// parallel pass over blocks of particles that carries each block through every queued control
+// and the scan (a dispatch per control step would cost more than the work at M = 100), and
+// then resamples by the configured policy. FastSLAM 1.0 samples each control's motion noise;
+// 2.0 propagates the motion mean and covariance between scans and draws the pose once, from
+// the proposal folded over all the observations of the scan. Randomness comes from the keyed
+// streams of parallel/random_stream.h (seed, step, particle, purpose), so results are
+// bit-identical for any thread count and grain, and do not depend on when the queue is drained.
+//
+// Bad input (NaN or infinite values, a negative or zero range, dt < 0, a missing or repeated id
+// in known-association mode) throws std::invalid_argument naming what is wrong and leaves the
+// filter exactly as it was.
+//
+// Ownership: the filter owns its particles, maps, node heap and threads (a TBB arena of
+// `config.threads`). `observe` borrows the scan for the call only.
+// Thread safety: thread-compatible: one call at a time; the filter runs its own parallel work.
+// Costs (M particles, K queued controls, Z observations in the scan, N landmarks per map):
+// `predict` O(1) amortised; `observe` O(M (K + Z log N)) work spread over the threads, plus
+// resampling O(M); `estimate` O(M + N) (it copies the best map out); `save` O(M N) worst case
+// (maps that share a root are written once).
+#pragma once
+
+#include <cstdint>
+#include <iosfwd>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "engine/filter_config.h"
+#include "memory/landmark_tree.h"
+#include "memory/particle_store.h"
+
+namespace fastslam::engine {
+
+// One odometry sample; the meaning of the two numbers is the motion model's (MotionKind).
+struct Control {
+  double u0 = 0.0;
+  double u1 = 0.0;
+};
+
+// One detection of a scan. `id` is the landmark's identity in known-association mode (>= 0);
+// ignored otherwise.
+struct Observation {
+  double range = 0.0;    // m, > 0
+  double bearing = 0.0;  // rad, from the sensor's heading, counter-clockwise
+  std::int64_t id = -1;
+};
+
+// A landmark of the best particle's map.
+struct MapLandmark {
+  memory::Slot slot = 0;
+  std::uint64_t id = 0;
+  double x = 0.0, y = 0.0;
+  double sxx = 0.0, sxy = 0.0, syy = 0.0;
+  double log_odds = 0.0;
+  std::int64_t last_seen = 0;
+};
+
+struct Estimate {
+  // Weighted mean of the particles' poses (heading by circular mean); v, omega for kBrownian.
+  double mean_pose[5] = {0, 0, 0, 0, 0};
+  // The pose of the particle of highest weight (lowest index on ties).
+  double best_pose[5] = {0, 0, 0, 0, 0};
+  std::uint32_t best_particle = 0;
+  double effective_sample_size = 0.0;
+  std::vector<MapLandmark> map;  // the best particle's map, in slot order
+};
+
+// The weighted-mean pose after one control (FilterConfig::record_trajectory).
+struct TrajectoryPoint {
+  std::uint64_t control = 0;  // index of the predict call, from 0
+  double x = 0.0, y = 0.0, theta = 0.0;
+};
+
+struct FilterStatistics {
+  std::uint64_t controls = 0;       // predict calls
+  std::uint64_t scans = 0;          // observe calls
+  std::uint64_t observations = 0;   // detections in all scans
+  std::uint64_t resamples = 0;      // scans after which the particles were resampled
+  std::uint64_t weight_resets = 0;  // scans whose every weight was zero (reset to uniform)
+  // Time in each phase, summed over threads (thread-seconds), and the wall time of observe.
+  double predict_seconds = 0.0;
+  double update_seconds = 0.0;
+  double resample_seconds = 0.0;
+  double observe_wall_seconds = 0.0;
+  // The node heap: live tree nodes and bytes of all maps together.
+  std::int64_t live_nodes = 0;
+  std::int64_t live_bytes = 0;
+};
+
+class Filter {
+ public:
+  // Throws std::invalid_argument as validate(config).
+  explicit Filter(const FilterConfig& config);
+  ~Filter();
+  Filter(const Filter&) = delete;
+  Filter& operator=(const Filter&) = delete;
+
+  const FilterConfig& config() const noexcept;
+
+  // Queues one odometry sample of duration dt. Throws std::invalid_argument (and queues
+  // nothing) unless dt >= 0 and every value is finite.
+  void predict(const Control& control, double dt);
+
+  // Runs the queued controls and this scan through every particle, then resamples by policy.
+  // Throws std::invalid_argument (and changes nothing) for a bad observation.
+  void observe(std::span<const Observation> scan);
+
+  // Drains the queue (as observe would, without a scan) and summarises the particles.
+  Estimate estimate();
+
+  FilterStatistics statistics() const;
+
+  // The weighted-mean pose after every control since the last call (drains the queue first).
+  // Empty unless config.record_trajectory.
+  std::vector<TrajectoryPoint> take_trajectory();
+
+  // The particles, after draining the queue: for tests, tools and diagnostics.
+  const memory::ParticleStore& particles();
+
+  // The whole state (config, counters, queued controls, particles and maps) in a versioned
+  // binary format; `load` throws std::runtime_error on a stream that is not one.
+  void save(std::ostream& out) const;
+  static std::unique_ptr<Filter> load(std::istream& in);
+
+ private:
+  struct Impl;
+  explicit Filter(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace fastslam::engine

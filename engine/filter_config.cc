@@ -1,0 +1,99 @@
+#include "engine/filter_config.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace fastslam::engine {
+namespace {
+
+void require(bool ok, const std::string& what) {
+  if (!ok) throw std::invalid_argument("FilterConfig: " + what);
+}
+
+bool positive(double v) { return std::isfinite(v) && v > 0; }
+
+}  // namespace
+
+void validate(const FilterConfig& c) {
+  require(c.particles >= 1, "particles must be at least 1 (got 0)");
+  require(c.algorithm == Algorithm::kFastSlam1 || c.algorithm == Algorithm::kFastSlam2,
+          "unknown algorithm");
+  require(c.association == Association::kKnown,
+          std::string("association '") + std::string(to_string(c.association)) +
+              "' is not implemented yet; use 'known'");
+  const MotionConfig& m = c.motion;
+  for (int k = 0; k < 2; ++k) {
+    require(std::isfinite(m.sigma_control[k]) && m.sigma_control[k] >= 0,
+            "motion.sigma_control[" + std::to_string(k) + "] must be finite and >= 0");
+  }
+  switch (m.kind) {
+    case MotionKind::kBaileyCar:
+      require(positive(m.wheelbase), "motion.wheelbase must be finite and > 0");
+      break;
+    case MotionKind::kVictoriaPark:
+      require(positive(m.geometry.l) && std::isfinite(m.geometry.a) &&
+                  std::isfinite(m.geometry.b) && std::isfinite(m.geometry.h) && m.geometry.h >= 0,
+              "motion.geometry must be finite with l > 0 and h >= 0");
+      break;
+    case MotionKind::kUnicycle:
+    case MotionKind::kBrownian:
+      break;
+    default:
+      require(false, "unknown motion kind");
+  }
+  const SensorConfig& s = c.sensor;
+  require(positive(s.sigma_range), "sensor.sigma_range must be finite and > 0");
+  require(positive(s.sigma_bearing), "sensor.sigma_bearing must be finite and > 0");
+  require(positive(s.max_range), "sensor.max_range must be finite and > 0");
+  require(positive(s.field_of_view) && s.field_of_view <= 2 * std::numbers::pi + 1e-12,
+          "sensor.field_of_view must be in (0, 2 pi]");
+  require(std::isfinite(s.offset.x) && std::isfinite(s.offset.y) && std::isfinite(s.offset.yaw),
+          "sensor.offset must be finite");
+  require(std::isfinite(c.log_new_landmark), "log_new_landmark must be finite");
+  const ExistenceConfig& e = c.existence;
+  require(std::isfinite(e.initial) && std::isfinite(e.seen) && std::isfinite(e.missed) &&
+              std::isfinite(e.remove_below),
+          "existence parameters must be finite");
+  parallel::validate(c.resample);
+  require(c.grain >= 1, "grain must be at least 1");
+  for (double v : c.initial_pose) require(std::isfinite(v), "initial_pose must be finite");
+}
+
+std::string_view to_string(Algorithm algorithm) {
+  switch (algorithm) {
+    case Algorithm::kFastSlam1:
+      return "fastslam1";
+    case Algorithm::kFastSlam2:
+      return "fastslam2";
+  }
+  return "unknown";
+}
+
+std::string_view to_string(Association association) {
+  switch (association) {
+    case Association::kKnown:
+      return "known";
+    case Association::kMaximumLikelihood:
+      return "ml";
+    case Association::kDataAssociationSampling:
+      return "das";
+  }
+  return "unknown";
+}
+
+std::string_view to_string(MotionKind kind) {
+  switch (kind) {
+    case MotionKind::kBaileyCar:
+      return "bailey-car";
+    case MotionKind::kUnicycle:
+      return "unicycle";
+    case MotionKind::kVictoriaPark:
+      return "victoria-park";
+    case MotionKind::kBrownian:
+      return "none";
+  }
+  return "unknown";
+}
+
+}  // namespace fastslam::engine

@@ -1,0 +1,88 @@
+// Everything a `Filter` is built from: the algorithm, the particle count, the association mode,
+// the motion and sensor models with their noises, the existence (log-odds) parameters, the
+// resampling policy, the seed and the threads. One plain struct, validated once by
+// `validate(config)`, which names the first field that is wrong.
+//
+// Thread safety: value types. Costs: validation is O(1).
+#pragma once
+
+#include <cstdint>
+#include <numbers>
+#include <string>
+#include <string_view>
+
+#include "engine/measurement_model.h"
+#include "engine/motion_model.h"
+#include "parallel/resample.h"
+
+namespace fastslam::engine {
+
+enum class Algorithm : std::uint8_t { kFastSlam1, kFastSlam2 };
+enum class Association : std::uint8_t {
+  kKnown,  // observations carry the landmark id (simulations, ground-truth tests)
+  kMaximumLikelihood,          // eq. 64 (unknown association issue)
+  kDataAssociationSampling,    // eq. 65 (unknown association issue)
+};
+enum class MotionKind : std::uint8_t {
+  kBaileyCar,     // control (V, G): speed and steering from the heading; Bailey's simulator
+  kUnicycle,      // control (v, omega)
+  kVictoriaPark,  // control (encoder speed, steering); the state is the laser's pose
+  kBrownian,      // no odometry (eq. 79-81): controls carry no information, only dt
+};
+
+struct MotionConfig {
+  MotionKind kind = MotionKind::kBaileyCar;
+  double wheelbase = 4.0;           // kBaileyCar
+  VictoriaParkGeometry geometry;    // kVictoriaPark
+  // Standard deviations of the control noise (per control component: speed m/s and steering
+  // rad for the cars, v and omega for the unicycle; for kBrownian the per-step increments of v
+  // and omega, eq. 80).
+  double sigma_control[2] = {0.3, 3.0 * std::numbers::pi / 180};
+};
+
+struct SensorConfig {
+  double sigma_range = 0.1;                              // m
+  double sigma_bearing = 1.0 * std::numbers::pi / 180;   // rad
+  SensorOffset offset;                                   // sensor pose on the vehicle
+  double max_range = 30.0;                               // perceptual range (negative information)
+  double field_of_view = std::numbers::pi;               // rad, centred on the sensor's heading
+};
+
+// Existence log-odds (eq. 73-75); the defaults are table 1's counter form.
+struct ExistenceConfig {
+  double initial = 1.0;       // log-odds of a new landmark
+  double seen = 1.0;          // l+ added when associated
+  double missed = 1.0;        // l- subtracted when in view and not associated
+  double remove_below = 0.0;  // removed when the log-odds fall below this
+};
+
+struct FilterConfig {
+  Algorithm algorithm = Algorithm::kFastSlam1;
+  std::uint32_t particles = 100;
+  Association association = Association::kKnown;
+  MotionConfig motion;
+  SensorConfig sensor;
+  // ln p0: the log-likelihood of "a new landmark" (eq. 64-65, 71); unknown association only.
+  double log_new_landmark = -6.0;
+  ExistenceConfig existence;
+  parallel::ResamplePolicy resample{parallel::ResamplePolicy::When::kEssBelowFraction, 0.75,
+                                    parallel::ResampleScheme::kSystematic};
+  std::uint64_t seed = 1;
+  unsigned threads = 0;      // 0: every core
+  std::size_t grain = 16;    // particles per parallel task
+  // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
+  // store per particle per control and a reduction per control).
+  bool record_trajectory = false;
+  // The initial pose of every particle (x, y, theta; v, omega for kBrownian).
+  double initial_pose[5] = {0, 0, 0, 0, 0};
+};
+
+// Throws std::invalid_argument naming the first unusable field (zero particles, a non-positive
+// or non-finite noise, wheelbase or range, an association the build does not support, ...).
+void validate(const FilterConfig& config);
+
+std::string_view to_string(Algorithm algorithm);
+std::string_view to_string(Association association);
+std::string_view to_string(MotionKind kind);
+
+}  // namespace fastslam::engine
