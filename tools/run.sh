@@ -14,4 +14,4 @@ fastslam_build release
 if [ $# -gt 0 ]; then
   exec build/release/tools/fastslam "$@"
 fi
-exec build/release/tools/fastslam memory-demo --out out/memory-demo
+exec build/release/tools/fastslam run --world grid --landmarks 10000 --particles 100 --out out/run

@@ -1,5 +1,6 @@
 #include "tools/simulator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -28,10 +29,11 @@ Simulator::Simulator(const World& world, const SimConfig& config, std::uint64_t 
       loops_left_(config.loops) {
   if (world.waypoints.empty()) throw std::invalid_argument("simulator: the world has no waypoints");
   if (!(config.dt > 0) || !(config.speed > 0) || !(config.wheelbase > 0) ||
-      !(config.max_range > 0) || !(config.dt_observe > 0) || !(config.field_of_view > 0)) {
+      !(config.max_range > 0) || !(config.dt_observe > 0) || !(config.field_of_view > 0) ||
+      !(config.min_range > 0) || !(config.min_range < config.max_range)) {
     throw std::invalid_argument(
         "simulator: dt, speed, wheelbase, max range, field of view and observation period must "
-        "be positive");
+        "be positive, and 0 < min range < max range");
   }
   if (config.sigma_v < 0 || config.sigma_steer < 0 || config.sigma_range < 0 ||
       config.sigma_bearing < 0) {
@@ -106,11 +108,15 @@ void Simulator::observe(SimStep& step) {
     // get_visible_landmarks.m keeps the half plane ahead (dx cos + dy sin > 0), i.e. |bearing|
     // < pi/2; a field of view generalises it.
     if (!(std::abs(bearing) < half_fov)) continue;
+    const double range = std::sqrt(dx * dx + dy * dy);
+    if (range < config_.min_range) continue;
     const double nr = noise.normal();
     const double nb = noise.normal();
     SimObservation z;
     z.landmark = i;
-    z.range = std::sqrt(dx * dx + dy * dy) + (config_.sensor_noise ? nr * config_.sigma_range : 0);
+    // Clamped so that a sensor never reports a range below its minimum, whatever the noise.
+    z.range = std::max(config_.min_range,
+                       range + (config_.sensor_noise ? nr * config_.sigma_range : 0.0));
     z.bearing = wrap(bearing + (config_.sensor_noise ? nb * config_.sigma_bearing : 0.0));
     step.scan.push_back(z);
   }

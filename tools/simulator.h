@@ -28,6 +28,8 @@ struct SimConfig {
   double sigma_v = 0.3;                                // m/s
   double sigma_steer = 3.0 * std::numbers::pi / 180;   // rad
   double max_range = 30.0;                             // m
+  double min_range = 0.5;  // m: nearer landmarks are not seen (inside the vehicle; and a noisy
+                           // range there could come out negative)
   double field_of_view = std::numbers::pi;             // rad, centred ahead (Bailey: the front half)
   double dt_observe = 8 * 0.025;                       // DT_OBSERVE, s
   double sigma_range = 0.1;                            // m
