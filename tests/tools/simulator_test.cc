@@ -64,7 +64,8 @@ TEST(Simulator, ScansSeeExactlyTheLandmarksInRangeAndInFront) {
       const double dy = world.landmarks[i].y - step.truth.y;
       // Bailey's get_visible_landmarks: the half plane ahead and the range circle.
       if (dx * std::cos(step.truth.theta) + dy * std::sin(step.truth.theta) > 0 &&
-          dx * dx + dy * dy < config.max_range * config.max_range) {
+          dx * dx + dy * dy < config.max_range * config.max_range &&
+          dx * dx + dy * dy >= config.min_range * config.min_range) {
         expected.insert(i);
       }
     }
