@@ -14,4 +14,5 @@ fastslam_build release
 if [ $# -gt 0 ]; then
   exec build/release/tools/fastslam "$@"
 fi
-exec build/release/tools/fastslam run --world grid --landmarks 10000 --particles 100 --out out/run
+build/release/tools/fastslam run --world grid --landmarks 10000 --particles 100 --out out/run
+/usr/bin/python3 tools/plot_run.py out/run

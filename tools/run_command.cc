@@ -233,7 +233,17 @@ int run_simulation(const RunOptions& options) {
       file << line;
     }
   }
-  std::printf("  wrote %s/{metrics.json,trajectory.csv,landmarks.csv,truth.csv}\n",
+  {
+    std::ofstream file = open("true_landmarks.csv");
+    file << "id,x,y\n";
+    char line[120];
+    for (std::size_t i = 0; i < world.landmarks.size(); ++i) {
+      std::snprintf(line, sizeof(line), "%zu,%.6f,%.6f\n", i, world.landmarks[i].x,
+                    world.landmarks[i].y);
+      file << line;
+    }
+  }
+  std::printf("  wrote %s/{metrics.json,trajectory.csv,landmarks.csv,truth.csv,true_landmarks.csv}\n",
               options.out.c_str());
   return 0;
 }
