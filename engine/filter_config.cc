@@ -4,6 +4,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "parallel/particle_kernel.h"
+
 namespace fastslam::engine {
 namespace {
 
@@ -56,7 +58,16 @@ void validate(const FilterConfig& c) {
               std::isfinite(e.remove_below),
           "existence parameters must be finite");
   parallel::validate(c.resample);
+  require(c.resample.when == parallel::ResamplePolicy::When::kEveryStep ||
+              c.resample.when == parallel::ResamplePolicy::When::kEssBelowFraction,
+          "resample.when is not a known policy");
+  require(c.resample.scheme == parallel::ResampleScheme::kSystematic ||
+              c.resample.scheme == parallel::ResampleScheme::kStratified ||
+              c.resample.scheme == parallel::ResampleScheme::kMultinomial,
+          "resample.scheme is not a known scheme");
   require(c.grain >= 1, "grain must be at least 1");
+  require(c.threads <= parallel::ParticleKernel::kMaxThreads,
+          "threads must be at most " + std::to_string(parallel::ParticleKernel::kMaxThreads));
   for (double v : c.initial_pose) require(std::isfinite(v), "initial_pose must be finite");
 }
 

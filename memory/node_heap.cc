@@ -1,6 +1,8 @@
 #include "memory/node_heap.h"
 
 #include <cstdlib>
+#include <memory>
+#include <mutex>
 #include <new>
 
 namespace fastslam::memory {
@@ -13,9 +15,20 @@ void bump(std::atomic<std::int64_t>& counter, std::int64_t delta) noexcept {
 
 }  // namespace
 
+NodeHeap::Counters& NodeHeap::local_counters() {
+  Counters*& mine = local_.local();
+  if (mine == nullptr) {
+    auto fresh = std::make_unique<Counters>();
+    std::lock_guard lock(registry_mutex_);
+    registry_.push_back(std::move(fresh));
+    mine = registry_.back().get();
+  }
+  return *mine;
+}
+
 void* NodeHeap::allocate(std::size_t bytes) {
   void* block = do_allocate(bytes);
-  Counters& c = counters_.local();
+  Counters& c = local_counters();
   bump(c.nodes, 1);
   bump(c.bytes, static_cast<std::int64_t>(bytes));
   bump(c.allocations, 1);
@@ -23,7 +36,7 @@ void* NodeHeap::allocate(std::size_t bytes) {
 }
 
 void NodeHeap::deallocate(void* block, std::size_t bytes) noexcept {
-  Counters& c = counters_.local();
+  Counters& c = local_counters();
   bump(c.nodes, -1);
   bump(c.bytes, -static_cast<std::int64_t>(bytes));
   do_deallocate(block, bytes);
@@ -31,10 +44,11 @@ void NodeHeap::deallocate(void* block, std::size_t bytes) noexcept {
 
 HeapStats NodeHeap::stats() const {
   HeapStats total;
-  for (const Counters& c : counters_) {
-    total.live_nodes += c.nodes.load(std::memory_order_relaxed);
-    total.live_bytes += c.bytes.load(std::memory_order_relaxed);
-    total.allocations += c.allocations.load(std::memory_order_relaxed);
+  std::lock_guard lock(registry_mutex_);
+  for (const std::unique_ptr<Counters>& c : registry_) {
+    total.live_nodes += c->nodes.load(std::memory_order_relaxed);
+    total.live_bytes += c->bytes.load(std::memory_order_relaxed);
+    total.allocations += c->allocations.load(std::memory_order_relaxed);
   }
   return total;
 }
@@ -59,6 +73,7 @@ PoolHeap::~PoolHeap() {
 }
 
 void* PoolHeap::do_allocate(std::size_t bytes) {
+  if (bytes < sizeof(FreeBlock)) bytes = sizeof(FreeBlock);  // as do_deallocate files it
   Cache& cache = caches_.local();
   for (int k = 0; k < kSizeClasses && cache.size[k] != 0; ++k) {
     if (cache.size[k] == bytes) {
@@ -70,7 +85,7 @@ void* PoolHeap::do_allocate(std::size_t bytes) {
       break;
     }
   }
-  return ::operator new(bytes < sizeof(FreeBlock) ? sizeof(FreeBlock) : bytes);
+  return ::operator new(bytes);
 }
 
 void PoolHeap::do_deallocate(void* block, std::size_t bytes) noexcept {

@@ -9,17 +9,21 @@
 //   - `PoolHeap`: per-thread free lists by block size above `MallocHeap`, so the hot path of a
 //     path copy (free a node in one step, allocate one the next) never leaves the thread.
 //
-// Ownership: a heap must outlive every block it handed out (every tree built on it). Blocks are
-// 16-byte aligned.
+// Ownership: a heap must outlive every block it handed out (every tree built on it). Blocks of
+// 16 bytes or more (every tree node) are 16-byte aligned; smaller ones as malloc aligns them.
 // Thread safety: `allocate`, `deallocate` and `stats` may be called from any number of threads
 // at once; a block may be freed by a thread other than the one that allocated it.
-// Costs: allocate/deallocate are O(1) and lock-free apart from what malloc does; counting is two
-// relaxed per-thread stores. `stats()` is O(threads that ever used the heap).
+// Costs: allocate/deallocate are O(1) and lock-free apart from what malloc does (and a short
+// lock on a thread's first use of the heap); counting is relaxed per-thread stores. `stats()`
+// takes a lock and is O(threads that ever used the heap).
 #pragma once
 
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <mutex>
+#include <vector>
 
 #include <oneapi/tbb/cache_aligned_allocator.h>
 #include <oneapi/tbb/enumerable_thread_specific.h>
@@ -41,7 +45,8 @@ class NodeHeap {
   NodeHeap& operator=(const NodeHeap&) = delete;
   virtual ~NodeHeap() = default;
 
-  // Returns a block of `bytes` bytes, 16-byte aligned. Throws std::bad_alloc when out of memory.
+  // Returns a block of `bytes` bytes, 16-byte aligned when bytes >= 16. Throws std::bad_alloc
+  // when out of memory.
   void* allocate(std::size_t bytes);
   // REQUIRES: `block` came from `allocate(bytes)` on this heap and was not freed since.
   void deallocate(void* block, std::size_t bytes) noexcept;
@@ -55,14 +60,23 @@ class NodeHeap {
  private:
   // Written only by the owning thread (relaxed load + store, no read-modify-write); atomics so
   // that `stats()` from another thread is not a data race.
-  struct Counters {
+  struct alignas(64) Counters {
     std::atomic<std::int64_t> nodes{0};
     std::atomic<std::int64_t> bytes{0};
     std::atomic<std::int64_t> allocations{0};
   };
-  tbb::enumerable_thread_specific<Counters, tbb::cache_aligned_allocator<Counters>,
+  // This thread's counters, created (and registered) on its first use of the heap.
+  Counters& local_counters();
+
+  // Thread -> its counters: lock-free lookup on the hot path. Never iterated: iterating an
+  // enumerable_thread_specific while another thread adds its element reads that element while
+  // it is being constructed; `stats()` walks `registry_` instead, where counters appear fully
+  // built, under `registry_mutex_`.
+  tbb::enumerable_thread_specific<Counters*, tbb::cache_aligned_allocator<Counters*>,
                                   tbb::ets_key_per_instance>
-      counters_;
+      local_;  // elements start as nullptr (value-initialised)
+  mutable std::mutex registry_mutex_;
+  std::vector<std::unique_ptr<Counters>> registry_;  // guarded by registry_mutex_
 };
 
 // Blocks from the process allocator (jemalloc where linked).

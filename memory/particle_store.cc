@@ -1,5 +1,6 @@
 #include "memory/particle_store.h"
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -7,7 +8,52 @@
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
 
+#if defined(__SANITIZE_THREAD__)
+#define FASTSLAM_MEMORY_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define FASTSLAM_MEMORY_TSAN 1
+#endif
+#endif
+#if defined(FASTSLAM_MEMORY_TSAN)
+#include <atomic>
+#include <thread>
+#include <vector>
+
+#include <oneapi/tbb/task_arena.h>
+#endif
+
 namespace fastslam::memory {
+namespace {
+
+// Calls body(begin, end) over [0, m) in blocks of `grain`, in parallel: TBB in the caller's
+// arena; under ThreadSanitizer on plain std::threads (as many as the caller's arena has),
+// because Debian's libtbb is not instrumented and TSan would report TBB's own task hand-offs
+// as races in our code (google/sanitizers#1004; parallel/internal/thread_fork_join.h).
+// `body` must not throw.
+template <class Body>
+void for_blocks(std::size_t m, std::size_t grain, const Body& body) {
+#if defined(FASTSLAM_MEMORY_TSAN)
+  const std::size_t blocks = (m + grain - 1) / grain;
+  const std::size_t threads =
+      std::min<std::size_t>(blocks, std::max(1, tbb::this_task_arena::max_concurrency()));
+  std::atomic<std::size_t> next{0};
+  auto worker = [&] {
+    for (std::size_t b = next.fetch_add(1); b < blocks; b = next.fetch_add(1)) {
+      body(b * grain, std::min(m, (b + 1) * grain));
+    }
+  };
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (std::thread& thread : pool) thread.join();
+#else
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, grain),
+                    [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
+#endif
+}
+
+}  // namespace
 
 ParticleStore::ParticleStore(std::size_t particles, NodeHeap& heap)
     : heap_(&heap),
@@ -32,19 +78,18 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   Column nx(m), ny(m), ntheta(m), nv(m), nomega(m), nlog_weight(m);
   std::vector<LandmarkTree> nmaps(m, LandmarkTree(*heap_));
   if (grain == 0) grain = 1;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, grain),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t k = r.begin(); k != r.end(); ++k) {
-                        const std::uint32_t i = index[k];
-                        nx[k] = x_[i];
-                        ny[k] = y_[i];
-                        ntheta[k] = theta_[i];
-                        nv[k] = v_[i];
-                        nomega[k] = omega_[i];
-                        nlog_weight[k] = log_weight_[i];
-                        nmaps[k] = maps_[i];  // bumps the root's count
-                      }
-                    });
+  for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k != end; ++k) {
+      const std::uint32_t i = index[k];
+      nx[k] = x_[i];
+      ny[k] = y_[i];
+      ntheta[k] = theta_[i];
+      nv[k] = v_[i];
+      nomega[k] = omega_[i];
+      nlog_weight[k] = log_weight_[i];
+      nmaps[k] = maps_[i];  // bumps the root's count
+    }
+  });
   x_.swap(nx);
   y_.swap(ny);
   theta_.swap(ntheta);
@@ -53,10 +98,9 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   log_weight_.swap(nlog_weight);
   maps_.swap(nmaps);
   // The old maps: each drops one reference; maps no survivor shares are freed, in parallel.
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nmaps.size(), grain),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t k = r.begin(); k != r.end(); ++k) nmaps[k].clear();
-                    });
+  for_blocks(nmaps.size(), grain, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k != end; ++k) nmaps[k].clear();
+  });
 }
 
 }  // namespace fastslam::memory

@@ -1,0 +1,830 @@
+// Template definitions of memory/spatial_index.h; not API, include that header instead.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <new>
+#include <numbers>
+#include <utility>
+#include <vector>
+
+namespace fastslam::memory {
+
+namespace internal {
+[[noreturn]] void throw_bad_position(const char* operation, double x, double y);
+[[noreturn]] void throw_no_entry(const char* operation, Slot slot, double x, double y);
+[[noreturn]] void throw_leaf_full(Slot slot, double x, double y);
+}  // namespace internal
+
+template <class P>
+BasicSpatialIndex<P>::BasicSpatialIndex(const BasicSpatialIndex& other) noexcept
+    : root_(other.root_), heap_(other.heap_), root_cell_(other.root_cell_), size_(other.size_) {
+  if (root_ != nullptr) {
+    root_->refs.acquire();
+  }
+}
+
+template <class P>
+BasicSpatialIndex<P>::BasicSpatialIndex(BasicSpatialIndex&& other) noexcept
+    : root_(std::exchange(other.root_, nullptr)),
+      heap_(other.heap_),
+      root_cell_(other.root_cell_),
+      size_(std::exchange(other.size_, 0)) {}
+
+template <class P>
+BasicSpatialIndex<P>& BasicSpatialIndex<P>::operator=(const BasicSpatialIndex& other) noexcept {
+  if (this != &other) {
+    if (other.root_ != nullptr) {
+      other.root_->refs.acquire();
+    }
+    release(root_, *heap_);
+    root_ = other.root_;
+    heap_ = other.heap_;
+    root_cell_ = other.root_cell_;
+    size_ = other.size_;
+  }
+  return *this;
+}
+
+template <class P>
+BasicSpatialIndex<P>& BasicSpatialIndex<P>::operator=(BasicSpatialIndex&& other) noexcept {
+  if (this != &other) {
+    release(root_, *heap_);
+    root_ = std::exchange(other.root_, nullptr);
+    heap_ = other.heap_;
+    root_cell_ = other.root_cell_;
+    size_ = std::exchange(other.size_, 0);
+  }
+  return *this;
+}
+
+template <class P>
+BasicSpatialIndex<P>::~BasicSpatialIndex() {
+  release(root_, *heap_);
+}
+
+template <class P>
+void BasicSpatialIndex<P>::clear() noexcept {
+  release(std::exchange(root_, nullptr), *heap_);
+  size_ = 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Geometry. Every cell is a square whose boundaries are exact doubles (the corner is a multiple
+// of the children's side, and |corner| / side stays far below 2^53), so "which child holds this
+// point" is decided by exact comparisons and is the same on every path that asks it.
+
+template <class P>
+unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
+                                        Cell& child) noexcept {
+  double cx = cell.x;
+  double cy = cell.y;
+  double side = cell.side;
+  unsigned ix = 0;
+  unsigned iy = 0;
+  for (unsigned l = 0; l < kLevelsPerNode; ++l) {
+    side *= 0.5;
+    ix <<= 1;
+    iy <<= 1;
+    if (x >= cx + side) {
+      cx += side;
+      ix |= 1;
+    }
+    if (y >= cy + side) {
+      cy += side;
+      iy |= 1;
+    }
+  }
+  child = {cx, cy, side, cell.level - static_cast<int>(kLevelsPerNode)};
+  return iy << kLevelsPerNode | ix;
+}
+
+template <class P>
+auto BasicSpatialIndex<P>::child_cell(const Cell& cell, unsigned index) noexcept -> Cell {
+  const double side = cell.side * (1.0 / static_cast<double>(1u << kLevelsPerNode));
+  const unsigned ix = index & ((1u << kLevelsPerNode) - 1);
+  const unsigned iy = index >> kLevelsPerNode;
+  return {cell.x + ix * side, cell.y + iy * side, side,
+          cell.level - static_cast<int>(kLevelsPerNode)};
+}
+
+template <class P>
+bool BasicSpatialIndex<P>::can_split(const Cell& cell) noexcept {
+  if (cell.level - static_cast<int>(kLevelsPerNode) < kMinLevel) {
+    return false;
+  }
+  const double limit = cell.side * (1.0 / static_cast<double>(1u << kLevelsPerNode)) * 0x1p50;
+  return std::fabs(cell.x) + cell.side <= limit && std::fabs(cell.y) + cell.side <= limit;
+}
+
+template <class P>
+double BasicSpatialIndex<P>::box_distance2(const Cell& cell, double x, double y) noexcept {
+  // Rounding is monotone, so each term is at most the same term for any point in the square.
+  double dx = 0.0;
+  double dy = 0.0;
+  if (x < cell.x) {
+    dx = cell.x - x;
+  } else if (x > cell.x + cell.side) {
+    dx = x - (cell.x + cell.side);
+  }
+  if (y < cell.y) {
+    dy = cell.y - y;
+  } else if (y > cell.y + cell.side) {
+    dy = y - (cell.y + cell.side);
+  }
+  return dx * dx + dy * dy;
+}
+
+template <class P>
+void BasicSpatialIndex<P>::check_point(double x, double y, const char* operation) {
+  if (!(std::fabs(x) <= kMaxCoordinate) || !(std::fabs(y) <= kMaxCoordinate)) {
+    internal::throw_bad_position(operation, x, y);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Nodes
+
+template <class P>
+auto BasicSpatialIndex<P>::make_leaf(std::uint32_t capacity) -> Node* {
+  void* block = heap_->allocate(leaf_bytes(capacity));
+  return ::new (block) Node(capacity);
+}
+
+template <class P>
+auto BasicSpatialIndex<P>::make_inner() -> Inner* {
+  void* block = heap_->allocate(sizeof(Inner));
+  return ::new (block) Inner();
+}
+
+template <class P>
+auto BasicSpatialIndex<P>::own(Node* node) -> Node* {
+  if (node->refs.unique()) {
+    return node;
+  }
+  Node* copy;
+  if (node->leaf()) {
+    copy = make_leaf(node->capacity);
+    std::memcpy(static_cast<void*>(entries(copy)), entries(node),
+                std::size_t{node->count} * sizeof(SpatialEntry));
+  } else {
+    Inner* inner = make_inner();
+    const auto* source = static_cast<const Inner*>(node);
+    for (unsigned i = 0; i < kWidth; ++i) {
+      Node* child = source->child[i];
+      if (child != nullptr) {
+        child->refs.acquire();
+      }
+      inner->child[i] = child;
+    }
+    copy = inner;
+  }
+  copy->count = node->count;
+  release(node, *heap_);
+  return copy;
+}
+
+template <class P>
+void BasicSpatialIndex<P>::free_node(Node* node, NodeHeap& heap) noexcept {
+  if (node->leaf()) {
+    heap.deallocate(node, leaf_bytes(node->capacity));
+  } else {
+    heap.deallocate(node, sizeof(Inner));
+  }
+}
+
+template <class P>
+void BasicSpatialIndex<P>::release(Node* node, NodeHeap& heap) noexcept {
+  if (node == nullptr || !node->refs.release()) {
+    return;
+  }
+  // The nodes to free form a stack chained through their (dead) counts: no recursion, no
+  // allocation, whatever the depth.
+  node->next_dead = nullptr;
+  Node* head = node;
+  while (head != nullptr) {
+    Node* next = head;
+    head = next->next_dead;
+    if (!next->leaf()) {
+      for (Node* child : static_cast<Inner*>(next)->child) {
+        if (child != nullptr && child->refs.release()) {
+          child->next_dead = head;
+          head = child;
+        }
+      }
+    }
+    free_node(next, heap);
+  }
+}
+
+template <class P>
+auto BasicSpatialIndex<P>::build(SpatialEntry* first, SpatialEntry* last, const Cell& cell)
+    -> Node* {
+  const auto n = static_cast<std::size_t>(last - first);
+  if (n == 0) {
+    return nullptr;
+  }
+  if (n <= kLeafCapacity || !can_split(cell)) {
+    const auto capacity = static_cast<std::uint32_t>(std::max<std::size_t>(
+        kLeafCapacity, n <= kLeafCapacity ? kLeafCapacity : std::bit_ceil(n)));
+    Node* leaf = make_leaf(capacity);
+    std::memcpy(static_cast<void*>(entries(leaf)), first, n * sizeof(SpatialEntry));
+    leaf->count = static_cast<std::uint32_t>(n);
+    return leaf;
+  }
+  Inner* inner = make_inner();
+  inner->count = static_cast<std::uint32_t>(n);
+  auto index_of = [&cell](const SpatialEntry& e) {
+    Cell unused;
+    return child_of(cell, e.x, e.y, unused);
+  };
+  std::sort(first, last, [&](const SpatialEntry& a, const SpatialEntry& b) {
+    return index_of(a) < index_of(b);
+  });
+  try {
+    for (SpatialEntry* begin = first; begin != last;) {
+      const unsigned i = index_of(*begin);
+      SpatialEntry* end = begin + 1;
+      while (end != last && index_of(*end) == i) {
+        ++end;
+      }
+      inner->child[i] = build(begin, end, child_cell(cell, i));
+      begin = end;
+    }
+  } catch (...) {
+    release(inner, *heap_);  // the children built so far go with it
+    throw;
+  }
+  return inner;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Changes
+
+template <class P>
+void BasicSpatialIndex<P>::grow_to(double x, double y) {
+  // The root square is [-h, h)^2; its children are aligned squares. Growing by kLevelsPerNode
+  // levels gives [-h', h')^2, h' = h * 2^L; the old root's children keep their squares and go
+  // one level down, under four new nodes (one per quadrant around the origin), which sit at
+  // the centre of the new root.
+  constexpr unsigned kSide = 1u << kLevelsPerNode;
+  constexpr unsigned kHalf = kSide / 2;
+  while (!contains(root_cell_, x, y)) {
+    Cell up = root_cell_;
+    up.level += static_cast<int>(kLevelsPerNode);
+    up.side *= static_cast<double>(kSide);
+    up.x = up.y = -0.5 * up.side;
+    if (!root_->leaf()) {
+      auto* old = static_cast<Inner*>(root_);
+      Inner* top = make_inner();  // may throw: nothing changed yet
+      std::array<Inner*, 4> quadrant{};
+      try {
+        for (unsigned i = 0; i < kWidth; ++i) {
+          if (old->child[i] == nullptr) {
+            continue;
+          }
+          const unsigned q = ((i >> kLevelsPerNode) >= kHalf ? 2u : 0u) |
+                             ((i & (kSide - 1)) >= kHalf ? 1u : 0u);
+          if (quadrant[q] == nullptr) {
+            quadrant[q] = make_inner();
+          }
+        }
+      } catch (...) {
+        for (Inner* node : quadrant) {
+          release(node, *heap_);
+        }
+        release(top, *heap_);
+        throw;
+      }
+      for (unsigned i = 0; i < kWidth; ++i) {
+        Node* child = old->child[i];
+        if (child == nullptr) {
+          continue;
+        }
+        const unsigned ix = i & (kSide - 1);
+        const unsigned iy = i >> kLevelsPerNode;
+        const unsigned q = (iy >= kHalf ? 2u : 0u) | (ix >= kHalf ? 1u : 0u);
+        const unsigned gx = ix >= kHalf ? ix - kHalf : ix + kHalf;
+        const unsigned gy = iy >= kHalf ? iy - kHalf : iy + kHalf;
+        child->refs.acquire();
+        quadrant[q]->child[gy << kLevelsPerNode | gx] = child;
+        quadrant[q]->count += child->count;
+      }
+      for (unsigned q = 0; q < 4; ++q) {
+        if (quadrant[q] != nullptr) {
+          const unsigned jx = (q & 1u) != 0 ? kHalf : kHalf - 1;
+          const unsigned jy = (q & 2u) != 0 ? kHalf : kHalf - 1;
+          top->child[jy << kLevelsPerNode | jx] = quadrant[q];
+        }
+      }
+      top->count = old->count;
+      release(old, *heap_);
+      root_ = top;
+    }
+    root_cell_ = up;  // a leaf root's entries lie in the larger square too
+  }
+}
+
+template <class P>
+void BasicSpatialIndex<P>::insert(Slot slot, double x, double y) {
+  check_point(x, y, "insert");
+  const SpatialEntry entry{slot, x, y};
+  if (root_ == nullptr) {
+    // The first square: [-16, 16)^2, or larger (by the growth step) until it holds the point.
+    Cell cell{-16.0, -16.0, 32.0, 5};
+    while (!contains(cell, x, y)) {
+      cell.level += static_cast<int>(kLevelsPerNode);
+      cell.side *= static_cast<double>(1u << kLevelsPerNode);
+      cell.x = cell.y = -0.5 * cell.side;
+    }
+    Node* leaf = make_leaf(kLeafCapacity);
+    entries(leaf)[0] = entry;
+    leaf->count = 1;
+    root_ = leaf;
+    root_cell_ = cell;
+    size_ = 1;
+    return;
+  }
+  grow_to(x, y);
+  std::array<Node*, kMaxDepth> path;
+  unsigned depth = 0;
+  Node** link = &root_;
+  Cell cell = root_cell_;
+  while (!(*link)->leaf()) {
+    *link = own(*link);
+    auto* inner = static_cast<Inner*>(*link);
+    path[depth++] = inner;
+    Cell child;
+    link = &inner->child[child_of(cell, x, y, child)];
+    cell = child;
+    if (*link == nullptr) {
+      *link = make_leaf(kLeafCapacity);  // linked empty: harmless if what follows throws
+    }
+  }
+  Node* leaf = *link;
+  if (leaf->count < leaf->capacity) {
+    leaf = own(leaf);
+    *link = leaf;
+    entries(leaf)[leaf->count++] = entry;
+  } else if (can_split(cell)) {
+    // A full leaf becomes a subtree. It holds kLeafCapacity entries, unless it grew at the
+    // finest size and became the root whose square then grew (rare: then a vector).
+    std::array<SpatialEntry, kLeafCapacity + 1> small;
+    std::vector<SpatialEntry> large;
+    SpatialEntry* all = small.data();
+    const std::size_t n = std::size_t{leaf->count} + 1;
+    if (n > small.size()) {
+      large.resize(n);
+      all = large.data();
+    }
+    std::copy_n(entries(leaf), leaf->count, all);
+    all[n - 1] = entry;
+    Node* subtree = build(all, all + n, cell);
+    release(leaf, *heap_);
+    *link = subtree;
+  } else {
+    if (leaf->count >= kMaxLeafEntries) {
+      internal::throw_leaf_full(slot, x, y);
+    }
+    Node* bigger = make_leaf(leaf->capacity * 2);
+    std::memcpy(static_cast<void*>(entries(bigger)), entries(leaf),
+                std::size_t{leaf->count} * sizeof(SpatialEntry));
+    bigger->count = leaf->count;
+    entries(bigger)[bigger->count++] = entry;
+    release(leaf, *heap_);
+    *link = bigger;
+  }
+  for (unsigned k = 0; k < depth; ++k) {
+    ++path[k]->count;
+  }
+  ++size_;
+}
+
+template <class P>
+bool BasicSpatialIndex<P>::locate(Slot slot, double x, double y, Cell* leaf_cell) const noexcept {
+  if (root_ == nullptr || !contains(root_cell_, x, y)) {
+    return false;
+  }
+  const Node* node = root_;
+  Cell cell = root_cell_;
+  while (!node->leaf()) {
+    Cell child;
+    node = static_cast<const Inner*>(node)->child[child_of(cell, x, y, child)];
+    if (node == nullptr) {
+      return false;
+    }
+    cell = child;
+  }
+  const SpatialEntry* e = entries(node);
+  for (std::uint32_t i = 0; i < node->count; ++i) {
+    if (e[i].slot == slot && e[i].x == x && e[i].y == y) {
+      if (leaf_cell != nullptr) {
+        *leaf_cell = cell;
+      }
+      return true;
+    }
+  }
+  return false;
+}
+
+template <class P>
+void BasicSpatialIndex<P>::erase_existing(Slot slot, double x, double y) {
+  std::array<Node*, kMaxDepth> path;
+  unsigned depth = 0;
+  Node** link = &root_;
+  Cell cell = root_cell_;
+  for (;;) {
+    *link = own(*link);  // on bad_alloc: same contents, nothing to undo
+    if ((*link)->leaf()) {
+      break;
+    }
+    auto* inner = static_cast<Inner*>(*link);
+    path[depth++] = inner;
+    Cell child;
+    link = &inner->child[child_of(cell, x, y, child)];
+    cell = child;
+  }
+  Node* leaf = *link;
+  SpatialEntry* e = entries(leaf);
+  std::uint32_t i = 0;
+  while (!(e[i].slot == slot && e[i].x == x && e[i].y == y)) {
+    ++i;
+  }
+  e[i] = e[--leaf->count];
+  for (unsigned k = 0; k < depth; ++k) {
+    --path[k]->count;
+  }
+  --size_;
+  shrink(x, y);
+}
+
+template <class P>
+void BasicSpatialIndex<P>::shrink(double x, double y) noexcept {
+  // The highest node on the (owned) path that is an inner node with few entries, or an empty
+  // leaf: it becomes one leaf (or nothing).
+  Node** link = &root_;
+  Cell cell = root_cell_;
+  while (*link != nullptr) {
+    Node* node = *link;
+    if (node->leaf() ? node->count == 0 : node->count <= kLeafCapacity / 2) {
+      Node* replacement = nullptr;
+      if (node->count > 0 && !node->leaf()) {
+        std::array<SpatialEntry, kLeafCapacity / 2> all;
+        std::size_t n = 0;
+        auto collect = [&](const SpatialEntry& e) { all[n++] = e; };
+        for_each_node(node, collect);
+        try {
+          replacement = build(all.data(), all.data() + n, cell);
+        } catch (...) {
+          break;  // best effort: the inner node stays, the index is correct as it is
+        }
+      }
+      release(node, *heap_);
+      *link = replacement;
+      break;
+    }
+    if (node->leaf()) {
+      break;
+    }
+    Cell child;
+    link = &static_cast<Inner*>(node)->child[child_of(cell, x, y, child)];
+    cell = child;
+  }
+  shrink_root();
+}
+
+template <class P>
+void BasicSpatialIndex<P>::shrink_root() noexcept {
+  // The inverse of grow_to, while every entry lies in the central square of 2^-L the side: a
+  // leaf root just takes the smaller square; an inner root whose entries all sit in
+  // the grandchildren next to the origin is replaced by a root holding those (best effort).
+  constexpr unsigned kSide = 1u << kLevelsPerNode;
+  constexpr unsigned kHalf = kSide / 2;
+  while (root_ != nullptr && root_cell_.level - static_cast<int>(kLevelsPerNode) >= 5) {
+    Cell down = root_cell_;
+    down.level -= static_cast<int>(kLevelsPerNode);
+    down.side /= static_cast<double>(kSide);
+    down.x = down.y = -0.5 * down.side;
+    if (root_->leaf()) {
+      const SpatialEntry* e = entries(root_);
+      bool inside = true;
+      for (std::uint32_t i = 0; i < root_->count && inside; ++i) {
+        inside = contains(down, e[i].x, e[i].y);
+      }
+      if (!inside) {
+        return;
+      }
+      root_cell_ = down;
+      continue;
+    }
+    auto* top = static_cast<Inner*>(root_);
+    for (unsigned i = 0; i < kWidth; ++i) {
+      const Node* child = top->child[i];
+      if (child == nullptr) {
+        continue;
+      }
+      const unsigned ix = i & (kSide - 1);
+      const unsigned iy = i >> kLevelsPerNode;
+      const bool central = (ix == kHalf || ix == kHalf - 1) && (iy == kHalf || iy == kHalf - 1);
+      if (!central || child->leaf()) {
+        return;
+      }
+      const auto* quadrant = static_cast<const Inner*>(child);
+      for (unsigned g = 0; g < kWidth; ++g) {
+        const unsigned gx = g & (kSide - 1);
+        const unsigned gy = g >> kLevelsPerNode;
+        const bool next_to_origin = (ix == kHalf) == (gx < kHalf) && (iy == kHalf) == (gy < kHalf);
+        if (quadrant->child[g] != nullptr && !next_to_origin) {
+          return;
+        }
+      }
+    }
+    Inner* smaller;
+    try {
+      smaller = make_inner();
+    } catch (...) {
+      return;  // best effort: the larger root is as correct
+    }
+    for (unsigned i = 0; i < kWidth; ++i) {
+      const auto* quadrant = static_cast<const Inner*>(top->child[i]);
+      if (quadrant == nullptr) {
+        continue;
+      }
+      for (unsigned g = 0; g < kWidth; ++g) {
+        Node* grandchild = quadrant->child[g];
+        if (grandchild == nullptr) {
+          continue;
+        }
+        const unsigned gx = g & (kSide - 1);
+        const unsigned gy = g >> kLevelsPerNode;
+        const unsigned ox = gx < kHalf ? gx + kHalf : gx - kHalf;
+        const unsigned oy = gy < kHalf ? gy + kHalf : gy - kHalf;
+        grandchild->refs.acquire();
+        smaller->child[oy << kLevelsPerNode | ox] = grandchild;
+      }
+    }
+    smaller->count = top->count;
+    release(top, *heap_);
+    root_ = smaller;
+    root_cell_ = down;
+  }
+}
+
+template <class P>
+void BasicSpatialIndex<P>::erase(Slot slot, double x, double y) {
+  if (!locate(slot, x, y, nullptr)) {
+    internal::throw_no_entry("erase", slot, x, y);
+  }
+  erase_existing(slot, x, y);
+}
+
+template <class P>
+void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x,
+                                double to_y) {
+  check_point(to_x, to_y, "move");
+  Cell leaf_cell;
+  if (!locate(slot, from_x, from_y, &leaf_cell)) {
+    internal::throw_no_entry("move", slot, from_x, from_y);
+  }
+  if (contains(leaf_cell, to_x, to_y)) {
+    // Same leaf: own the path once and change the entry in place.
+    Node** link = &root_;
+    Cell cell = root_cell_;
+    for (;;) {
+      *link = own(*link);
+      if ((*link)->leaf()) {
+        break;
+      }
+      Cell child;
+      link = &static_cast<Inner*>(*link)->child[child_of(cell, from_x, from_y, child)];
+      cell = child;
+    }
+    SpatialEntry* e = entries(*link);
+    std::uint32_t i = 0;
+    while (!(e[i].slot == slot && e[i].x == from_x && e[i].y == from_y)) {
+      ++i;
+    }
+    e[i].x = to_x;
+    e[i].y = to_y;
+    return;
+  }
+  insert(slot, to_x, to_y);
+  try {
+    erase_existing(slot, from_x, from_y);
+  } catch (...) {
+    // The path to the new entry is owned (insert made it so): removing it allocates nothing.
+    erase_existing(slot, to_x, to_y);
+    throw;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Queries
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::for_each_node(const Node* node, Visit& visit) {
+  if (node->leaf()) {
+    const SpatialEntry* e = entries(node);
+    for (std::uint32_t i = 0; i < node->count; ++i) {
+      visit(e[i]);
+    }
+    return;
+  }
+  for (const Node* child : static_cast<const Inner*>(node)->child) {
+    if (child != nullptr) {
+      for_each_node(child, visit);
+    }
+  }
+}
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::for_each(Visit&& visit) const {
+  if (root_ != nullptr) {
+    for_each_node(root_, visit);
+  }
+}
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::within_node(const Node* node, const Cell& cell, double x, double y,
+                                       double r2, double prune2, Visit& visit) {
+  if (node->leaf()) {
+    const SpatialEntry* e = entries(node);
+    for (std::uint32_t i = 0; i < node->count; ++i) {
+      const double dx = e[i].x - x;
+      const double dy = e[i].y - y;
+      if (dx * dx + dy * dy <= r2) {
+        visit(e[i]);
+      }
+    }
+    return;
+  }
+  const auto* inner = static_cast<const Inner*>(node);
+  for (unsigned i = 0; i < kWidth; ++i) {
+    const Node* child = inner->child[i];
+    if (child == nullptr) {
+      continue;
+    }
+    const Cell sub = child_cell(cell, i);
+    if (box_distance2(sub, x, y) > prune2) {
+      continue;
+    }
+    // A square wholly inside the disc (with a margin for rounding) needs no per-entry test.
+    const double fx = std::max(std::fabs(sub.x - x), std::fabs(sub.x + sub.side - x));
+    const double fy = std::max(std::fabs(sub.y - y), std::fabs(sub.y + sub.side - y));
+    if (fx * fx + fy * fy <= r2 * (1.0 - 0x1p-40)) {
+      for_each_node(child, visit);
+    } else {
+      within_node(child, sub, x, y, r2, prune2, visit);
+    }
+  }
+}
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::within(double x, double y, double radius, Visit&& visit) const {
+  if (root_ == nullptr) {
+    return;
+  }
+  const double r2 = radius * radius;
+  const double prune2 = r2 + r2 * 0x1p-40;  // rounding margin: never prunes an entry within
+  if (box_distance2(root_cell_, x, y) > prune2) {
+    return;
+  }
+  within_node(root_, root_cell_, x, y, r2, prune2, visit);
+}
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::in_footprint(double x, double y, double heading, double max_range,
+                                        double field_of_view, Visit&& visit) const {
+  constexpr double kTwoPi = 2.0 * std::numbers::pi;
+  if (field_of_view >= kTwoPi) {
+    within(x, y, max_range, visit);
+    return;
+  }
+  const double half = 0.5 * field_of_view;
+  within(x, y, max_range, [&](const SpatialEntry& e) {
+    const double dx = e.x - x;
+    const double dy = e.y - y;
+    if ((dx == 0.0 && dy == 0.0) ||
+        std::fabs(std::remainder(std::atan2(dy, dx) - heading, kTwoPi)) <= half) {
+      visit(e);
+    }
+  });
+}
+
+template <class P>
+struct BasicSpatialIndex<P>::Best {
+  SpatialEntry* out;
+  std::size_t k;
+  std::size_t n;
+  double x;
+  double y;
+  double d2(const SpatialEntry& e) const noexcept {
+    const double dx = e.x - x;
+    const double dy = e.y - y;
+    return dx * dx + dy * dy;
+  }
+  bool less(const SpatialEntry& a, const SpatialEntry& b) const noexcept {
+    return d2(a) < d2(b);
+  }
+};
+
+template <class P>
+void BasicSpatialIndex<P>::nearest_node(const Node* node, const Cell& cell, Best& best) noexcept {
+  auto less = [&best](const SpatialEntry& a, const SpatialEntry& b) { return best.less(a, b); };
+  if (node->leaf()) {
+    const SpatialEntry* e = entries(node);
+    for (std::uint32_t i = 0; i < node->count; ++i) {
+      if (best.n < best.k) {
+        best.out[best.n++] = e[i];
+        std::push_heap(best.out, best.out + best.n, less);
+      } else if (best.d2(e[i]) < best.d2(best.out[0])) {
+        std::pop_heap(best.out, best.out + best.n, less);
+        best.out[best.n - 1] = e[i];
+        std::push_heap(best.out, best.out + best.n, less);
+      }
+    }
+    return;
+  }
+  // Children nearest first, so the bound tightens early.
+  std::array<std::pair<double, unsigned>, kWidth> order;
+  unsigned count = 0;
+  const auto* inner = static_cast<const Inner*>(node);
+  for (unsigned i = 0; i < kWidth; ++i) {
+    if (inner->child[i] != nullptr) {
+      order[count++] = {box_distance2(child_cell(cell, i), best.x, best.y), i};
+    }
+  }
+  std::sort(order.begin(), order.begin() + count);
+  for (unsigned j = 0; j < count; ++j) {
+    if (best.n == best.k) {
+      const double worst = best.d2(best.out[0]);
+      if (order[j].first > worst + worst * 0x1p-40) {
+        break;
+      }
+    }
+    const unsigned i = order[j].second;
+    nearest_node(inner->child[i], child_cell(cell, i), best);
+  }
+}
+
+template <class P>
+std::size_t BasicSpatialIndex<P>::nearest(double x, double y, std::size_t k,
+                                          std::span<SpatialEntry> out) const {
+  k = std::min(k, out.size());
+  if (root_ == nullptr || k == 0) {
+    return 0;
+  }
+  Best best{out.data(), k, 0, x, y};
+  nearest_node(root_, root_cell_, best);
+  std::sort_heap(out.data(), out.data() + best.n,
+                 [&best](const SpatialEntry& a, const SpatialEntry& b) { return best.less(a, b); });
+  return best.n;
+}
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::for_each_path_node(double x, double y, Visit&& visit) const {
+  if (root_ == nullptr || !contains(root_cell_, x, y)) {
+    return;
+  }
+  const Node* node = root_;
+  Cell cell = root_cell_;
+  while (node != nullptr) {
+    visit(static_cast<const void*>(node));
+    if (node->leaf()) {
+      return;
+    }
+    Cell child;
+    node = static_cast<const Inner*>(node)->child[child_of(cell, x, y, child)];
+    cell = child;
+  }
+}
+
+template <class P>
+unsigned BasicSpatialIndex<P>::depth() const noexcept {
+  struct Walk {
+    static unsigned of(const Node* node) noexcept {
+      if (node->leaf()) {
+        return 1;
+      }
+      unsigned deepest = 0;
+      for (const Node* child : static_cast<const Inner*>(node)->child) {
+        if (child != nullptr) {
+          deepest = std::max(deepest, of(child));
+        }
+      }
+      return deepest + 1;
+    }
+  };
+  return root_ == nullptr ? 0 : Walk::of(root_);
+}
+
+}  // namespace fastslam::memory

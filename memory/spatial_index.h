@@ -1,0 +1,264 @@
+// The spatial index of one particle's map: "landmarks within distance d of this point" and
+// "landmarks inside this sensor footprint" in O(log N + k), persistent like the landmark tree.
+//
+// Design note (FastSLAM paper, section 8; docs/spatial-index.md has the measurements). Data
+// association needs, per particle and observation, the landmarks near the predicted
+// observation, and negative information needs the landmarks inside the sensor's footprint; a
+// scan of the map is O(N) per query. The index is a bucketed region quadtree over the plane:
+//   - a node covers a square of side 2^level metres (level an integer; every cell boundary is
+//     an exact double, so which child holds a point is decided exactly); an inner node has
+//     4^kLevelsPerNode children (a 4-way quadtree, or 16-way: two quadtree levels per node,
+//     which halves the depth); a leaf holds up to kLeafCapacity entries (slot, x, y) inline;
+//   - a leaf that overflows splits (recursively, until every part fits), unless its square is
+//     at the minimum size (side 2^kMinLevel, or the finest side at which its boundaries are
+//     still exact doubles); such a leaf grows instead, up to kMaxLeafEntries entries (points
+//     closer than a quarter millimetre: duplicates, in practice);
+//   - an inner node whose subtree falls to kLeafCapacity / 2 entries or fewer (on erase or
+//     move) merges back into one leaf;
+//   - the root square is [-h, h)^2, centred on the origin, and every other square is aligned
+//     (its corner a multiple of its side), so a node's square does not depend on the history.
+//     When an entry falls outside, the root grows by 2^kLevelsPerNode (its children go one
+//     level down under four new quadrant nodes), so the world need not be known in advance;
+//     it shrinks back when the entries allow, so the depth follows the live map's extent.
+// Persistence is the landmark tree's: copying an index copies a root pointer (O(1)); a change
+// copies the root-to-leaf path of the entry and shares every other subtree; a node whose
+// reference count is one belongs to this index alone and is changed in place. A leaf's entries
+// are exact, so queries are exact whatever moved (loop closures move landmarks by metres: the
+// entry leaves its cell and is re-inserted where it now is).
+//
+// Coordinates: finite, |x|, |y| <= kMaxCoordinate (1e150, so squared distances cannot
+// overflow). Distances are Euclidean, compared squared: an entry is within `radius` of (qx, qy)
+// when (x - qx)^2 + (y - qy)^2 <= radius^2, evaluated in double as written.
+// Slots: the index does not check that a slot is inserted once; the engine stores each
+// landmark once, at its mean, and tells the index where it was when it moves or is removed.
+//
+// Ownership: an index borrows its `NodeHeap`, which must outlive it and every copy of it.
+// Visitors are borrowed for the call only.
+// Thread safety: a handle is thread-compatible (const methods may run concurrently; a mutating
+// method needs exclusive use of that handle). Handles that share nodes may be copied, queried,
+// changed and destroyed from any threads at once: counts are atomic (relaxed increment,
+// acquire-release decrement) and a shared node is never written, only copied. A visitor must
+// not change the index it is visiting.
+// Costs (N entries, h = depth = O(log N) for points not closer than the minimum cell, B =
+// kLeafCapacity, W = 4^kLevelsPerNode):
+//   copy, move, size, empty: O(1), no allocation.
+//   within, in_footprint: O(h + k + boxes touched), no allocation; the footprint is the disc
+//     query filtered by bearing (boxes are pruned by distance only).
+//   nearest: O(h + k log k) typically (branch and bound), no allocation.
+//   insert: O(h + B) plus a split (O(B) nodes at most); copies the shared nodes on its path.
+//   erase: O(h + B) plus a merge (O(B * W) when it happens); copies the shared nodes on its
+//     path; never fails after it started changing the index (a merge that cannot allocate is
+//     skipped, the index stays correct).
+//   move: as erase + insert; one path copy, in place, when the old and new positions share a
+//     leaf's square.
+//   destruction: O(1) while other handles share the root; freeing is iterative (no recursion,
+//     no allocation) and frees exactly the nodes no other index holds.
+#pragma once
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "memory/landmark_tree.h"  // Slot, AtomicRefcount, LocalRefcount
+#include "memory/node_heap.h"
+
+namespace fastslam::memory {
+
+// One entry of the index: a landmark's slot and where the index stores it.
+struct SpatialEntry {
+  Slot slot = 0;
+  double x = 0.0;
+  double y = 0.0;
+  friend bool operator==(const SpatialEntry&, const SpatialEntry&) = default;
+};
+
+// The shape and counting of an index (as TreePolicy for the landmark tree).
+template <unsigned LevelsPerNode, unsigned LeafCapacity, class Refcount>
+struct SpatialPolicy {
+  static constexpr unsigned kLevelsPerNode = LevelsPerNode;
+  static constexpr unsigned kLeafCapacity = LeafCapacity;
+  using RefcountType = Refcount;
+};
+
+// The default: 4-way nodes, leaves of 16 entries (docs/spatial-index.md has the measurements).
+using DefaultSpatialPolicy = SpatialPolicy<1, 16, AtomicRefcount>;
+
+template <class Policy>
+class BasicSpatialIndex {
+ public:
+  static constexpr unsigned kLevelsPerNode = Policy::kLevelsPerNode;
+  static constexpr unsigned kWidth = 1u << (2 * kLevelsPerNode);  // children per inner node
+  static constexpr unsigned kLeafCapacity = Policy::kLeafCapacity;
+  static_assert(kLevelsPerNode >= 1 && kLevelsPerNode <= 3);
+  static_assert(kLeafCapacity >= 2 && kLeafCapacity <= 256);
+  // Finest cell side: 2^kMinLevel metres (0.24 mm).
+  static constexpr int kMinLevel = -12;
+  // Entries one leaf at the finest size may hold (points closer than the finest cell).
+  static constexpr std::uint32_t kMaxLeafEntries = 1u << 20;
+  static constexpr double kMaxCoordinate = 1e150;
+  // Nodes on a root-to-leaf path, at most: root squares stay below 2^505 m (coordinates are
+  // below 2^499), leaves at least 2^kMinLevel.
+  static constexpr unsigned kMaxDepth = (505 - kMinLevel) / kLevelsPerNode + 2;
+
+  // An empty index whose nodes will come from `heap`.
+  explicit BasicSpatialIndex(NodeHeap& heap) noexcept : heap_(&heap) {}
+  BasicSpatialIndex(const BasicSpatialIndex& other) noexcept;
+  BasicSpatialIndex(BasicSpatialIndex&& other) noexcept;
+  BasicSpatialIndex& operator=(const BasicSpatialIndex& other) noexcept;
+  BasicSpatialIndex& operator=(BasicSpatialIndex&& other) noexcept;
+  ~BasicSpatialIndex();
+
+  std::size_t size() const noexcept { return size_; }
+  bool empty() const noexcept { return size_ == 0; }
+  NodeHeap& heap() const noexcept { return *heap_; }
+  // True when both handles hold the very same root (a copy not yet changed).
+  bool shares_root_with(const BasicSpatialIndex& other) const noexcept {
+    return root_ == other.root_;
+  }
+
+  // Adds (slot, x, y). Throws std::invalid_argument when x or y is not finite or exceeds
+  // kMaxCoordinate in magnitude, std::length_error when a finest-size leaf is full, or
+  // std::bad_alloc; then the index holds the same entries as before.
+  void insert(Slot slot, double x, double y);
+
+  // Removes the entry (slot, x, y): `x, y` is the position it is stored at, compared exactly.
+  // Throws std::out_of_range when there is no such entry, or std::bad_alloc; then the index
+  // holds the same entries as before.
+  void erase(Slot slot, double from_x, double from_y);
+
+  // Moves the entry (slot, from) to `to`. Throws as erase (no such entry) and insert (bad `to`,
+  // bad_alloc); then the index holds the same entries as before.
+  void move(Slot slot, double from_x, double from_y, double to_x, double to_y);
+
+  // Removes every entry (releases this handle's reference to the root).
+  void clear() noexcept;
+
+  // visit(const SpatialEntry&) for every entry within `radius` of (x, y) (see the file comment
+  // for "within"), in no particular order. REQUIRES: arguments finite, radius >= 0.
+  template <class Visit>
+  void within(double x, double y, double radius, Visit&& visit) const;
+
+  // visit(const SpatialEntry&) for every entry inside the sensor footprint of a sensor at
+  // (x, y) facing `heading` (radians): within `max_range`, and with a bearing off the heading
+  // by at most field_of_view / 2: |remainder(atan2(ey - y, ex - x) - heading, 2 pi)| <=
+  // field_of_view / 2. An entry at the sensor's own position is inside. field_of_view >= 2 pi
+  // is the whole disc. REQUIRES: arguments finite, max_range >= 0, field_of_view >= 0.
+  template <class Visit>
+  void in_footprint(double x, double y, double heading, double max_range, double field_of_view,
+                    Visit&& visit) const;
+
+  // The min(k, out.size(), size()) entries nearest to (x, y), written to `out` in increasing
+  // distance (ties in any order); returns how many. REQUIRES: x, y finite.
+  std::size_t nearest(double x, double y, std::size_t k, std::span<SpatialEntry> out) const;
+
+  // visit(const SpatialEntry&) for every entry, in no particular order.
+  template <class Visit>
+  void for_each(Visit&& visit) const;
+
+  // Introspection for tests and diagnostics: visit(const void* node) for each node on the path
+  // from the root to the node whose square holds (x, y) (a leaf, or an inner node with no child
+  // there). Nothing when the index is empty or (x, y) lies outside the root's square.
+  template <class Visit>
+  void for_each_path_node(double x, double y, Visit&& visit) const;
+  // Levels of nodes from the root to the deepest leaf (0 when empty).
+  unsigned depth() const noexcept;
+
+ private:
+  using Refcount = typename Policy::RefcountType;
+  // The 16-byte header of every node. Once the count dropped to zero the node belongs to the
+  // thread that freed it, which reuses the count's bytes to chain the nodes still to be freed.
+  struct Node {
+    explicit Node(std::uint32_t leaf_capacity) noexcept : refs(), capacity(leaf_capacity) {}
+    union {
+      Refcount refs;
+      Node* next_dead;
+    };
+    std::uint32_t count = 0;  // entries in the subtree (a leaf: entries stored)
+    std::uint32_t capacity;   // 0: inner node; else entries the leaf has room for
+    bool leaf() const noexcept { return capacity != 0; }
+  };
+  static_assert(sizeof(Node) == 16);
+  struct Inner : Node {
+    Inner() noexcept : Node(0) {}
+    Node* child[kWidth] = {};
+  };
+  // A square: corner (x, y), side 2^level.
+  struct Cell {
+    double x;
+    double y;
+    double side;
+    int level;
+  };
+
+  static SpatialEntry* entries(Node* leaf) noexcept {
+    return reinterpret_cast<SpatialEntry*>(reinterpret_cast<std::byte*>(leaf) + sizeof(Node));
+  }
+  static const SpatialEntry* entries(const Node* leaf) noexcept {
+    return reinterpret_cast<const SpatialEntry*>(reinterpret_cast<const std::byte*>(leaf) +
+                                                 sizeof(Node));
+  }
+  static std::size_t leaf_bytes(std::uint32_t capacity) noexcept {
+    return sizeof(Node) + std::size_t{capacity} * sizeof(SpatialEntry);
+  }
+  static bool contains(const Cell& cell, double x, double y) noexcept {
+    return x >= cell.x && x < cell.x + cell.side && y >= cell.y && y < cell.y + cell.side;
+  }
+  // The child of `cell` holding (x, y), and its index; exact comparisons against boundaries.
+  static unsigned child_of(const Cell& cell, double x, double y, Cell& child) noexcept;
+  static Cell child_cell(const Cell& cell, unsigned index) noexcept;
+  // Whether a leaf of `cell` may split (children at least kMinLevel, boundaries exact).
+  static bool can_split(const Cell& cell) noexcept;
+  // Squared distance from (x, y) to the square, never more than to any point inside it.
+  static double box_distance2(const Cell& cell, double x, double y) noexcept;
+  static void check_point(double x, double y, const char* operation);
+
+  Node* make_leaf(std::uint32_t capacity);
+  Inner* make_inner();
+  // A node equal to `node` that this index holds alone (see the landmark tree's `own`).
+  Node* own(Node* node);
+  static void release(Node* node, NodeHeap& heap) noexcept;
+  static void free_node(Node* node, NodeHeap& heap) noexcept;
+  // A subtree for `cell` holding entries [first, last) (which it reorders); splits as needed.
+  Node* build(SpatialEntry* first, SpatialEntry* last, const Cell& cell);
+  // Grows the root square until it holds (x, y); may allocate (a new root and four quadrant
+  // nodes per step); on bad_alloc the index is as before the failed step.
+  void grow_to(double x, double y);
+  // Index of (slot, x, y) in the leaf whose square holds (x, y), with that leaf's square, or
+  // false. Read-only.
+  bool locate(Slot slot, double x, double y, Cell* leaf_cell) const noexcept;
+  // Removes the located entry (slot, x, y), which must exist; owns the path first (may throw
+  // bad_alloc before any change), then changes nothing that can fail.
+  void erase_existing(Slot slot, double x, double y);
+  // Merges the highest inner node on the path to (x, y) that holds kLeafCapacity / 2 entries or
+  // fewer into one leaf (best effort: skipped when the leaf cannot be allocated), then
+  // shrink_root. The path must be owned.
+  void shrink(double x, double y) noexcept;
+  // Halves the root square (by 2^kLevelsPerNode) while every entry lies in the smaller one.
+  void shrink_root() noexcept;
+
+  template <class Visit>
+  static void within_node(const Node* node, const Cell& cell, double x, double y, double r2,
+                          double prune2, Visit& visit);
+  template <class Visit>
+  static void for_each_node(const Node* node, Visit& visit);
+  struct Best;  // nearest(): the running k best, a max-heap on distance
+  static void nearest_node(const Node* node, const Cell& cell, Best& best) noexcept;
+
+  Node* root_ = nullptr;
+  NodeHeap* heap_;
+  Cell root_cell_{0.0, 0.0, 1.0, 0};
+  std::size_t size_ = 0;
+};
+
+using SpatialIndex = BasicSpatialIndex<DefaultSpatialPolicy>;
+
+extern template class BasicSpatialIndex<SpatialPolicy<1, 8, AtomicRefcount>>;
+extern template class BasicSpatialIndex<SpatialPolicy<1, 16, AtomicRefcount>>;
+extern template class BasicSpatialIndex<SpatialPolicy<2, 8, AtomicRefcount>>;
+extern template class BasicSpatialIndex<SpatialPolicy<2, 16, AtomicRefcount>>;
+extern template class BasicSpatialIndex<SpatialPolicy<1, 8, LocalRefcount>>;
+
+}  // namespace fastslam::memory
+
+#include "memory/internal/spatial_index_impl.h"

@@ -1,0 +1,682 @@
+// The spatial index against brute force: every query (within, in_footprint, nearest, for_each)
+// over random maps (uniform, clustered, duplicates, points on cell boundaries, huge
+// coordinates), through inserts, small and large moves and removals, after copies that each
+// change differently (one oracle per handle), resampling-style gathers and growth of the root;
+// strong guarantee under injected allocation failures; exact node counts of path copying; many
+// threads copying, querying, moving and releasing shared indexes at once. Every test ends with
+// zero live nodes. Labelled "concurrency": runs under ThreadSanitizer (smaller sizes).
+#include "memory/spatial_index.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <set>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "memory/node_heap.h"
+#include "parallel/particle_kernel.h"
+
+namespace fastslam::memory {
+namespace {
+
+#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
+constexpr bool kSanitized = true;
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer) || __has_feature(address_sanitizer)
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
+#else
+constexpr bool kSanitized = false;
+#endif
+
+template <class T>
+constexpr T sized(T full, T small) {
+  return kSanitized ? small : full;
+}
+
+// Forwards to another heap and throws std::bad_alloc on the k-th allocation after `fail_at(k)`
+// (as tests/memory/heap_fixtures.h's, copied to keep this suite self-contained).
+class FailingHeap final : public NodeHeap {
+ public:
+  explicit FailingHeap(NodeHeap& inner) : inner_(&inner) {}
+  void fail_at(std::int64_t k) { countdown_ = k; }
+  void disarm() { countdown_ = 0; }
+
+ protected:
+  void* do_allocate(std::size_t bytes) override {
+    if (countdown_ > 0 && --countdown_ == 0) {
+      throw std::bad_alloc();
+    }
+    return inner_->allocate(bytes);
+  }
+  void do_deallocate(void* block, std::size_t bytes) noexcept override {
+    inner_->deallocate(block, bytes);
+  }
+
+ private:
+  NodeHeap* inner_;
+  std::int64_t countdown_ = 0;
+};
+
+// ---------------------------------------------------------------------------------------------
+// The oracle: the entries in a vector, every query by brute force.
+
+using Oracle = std::vector<SpatialEntry>;
+
+bool entry_less(const SpatialEntry& a, const SpatialEntry& b) {
+  if (a.slot != b.slot) {
+    return a.slot < b.slot;
+  }
+  if (a.x != b.x) {
+    return a.x < b.x;
+  }
+  return a.y < b.y;
+}
+
+std::vector<SpatialEntry> sorted(std::vector<SpatialEntry> v) {
+  std::sort(v.begin(), v.end(), entry_less);
+  return v;
+}
+
+double d2(const SpatialEntry& e, double x, double y) {
+  const double dx = e.x - x;
+  const double dy = e.y - y;
+  return dx * dx + dy * dy;
+}
+
+std::vector<SpatialEntry> brute_within(const Oracle& oracle, double x, double y, double r) {
+  std::vector<SpatialEntry> out;
+  for (const SpatialEntry& e : oracle) {
+    if (d2(e, x, y) <= r * r) {
+      out.push_back(e);
+    }
+  }
+  return sorted(out);
+}
+
+std::vector<SpatialEntry> brute_footprint(const Oracle& oracle, double x, double y, double heading,
+                                          double range, double fov) {
+  std::vector<SpatialEntry> out;
+  for (const SpatialEntry& e : oracle) {
+    if (d2(e, x, y) > range * range) {
+      continue;
+    }
+    const double dx = e.x - x;
+    const double dy = e.y - y;
+    const bool at_sensor = dx == 0.0 && dy == 0.0;
+    const double off = std::remainder(std::atan2(dy, dx) - heading, 2.0 * std::numbers::pi);
+    if (at_sensor || fov >= 2.0 * std::numbers::pi || std::fabs(off) <= fov / 2) {
+      out.push_back(e);
+    }
+  }
+  return sorted(out);
+}
+
+// The query points and radii a check uses: near stored entries, and anywhere in the extent.
+struct Query {
+  double x;
+  double y;
+  double r;
+};
+
+template <class Index>
+::testing::AssertionResult same_as_brute_force(const Index& index, const Oracle& oracle,
+                                               std::mt19937_64& rng, int queries) {
+  if (index.size() != oracle.size() || index.empty() != oracle.empty()) {
+    return ::testing::AssertionFailure() << "size " << index.size() << ", oracle " << oracle.size();
+  }
+  std::vector<SpatialEntry> all;
+  index.for_each([&](const SpatialEntry& e) { all.push_back(e); });
+  if (sorted(all) != sorted(oracle)) {
+    return ::testing::AssertionFailure() << "for_each differs from the oracle";
+  }
+  double lo_x = 0.0;
+  double hi_x = 1.0;
+  double lo_y = 0.0;
+  double hi_y = 1.0;
+  if (!oracle.empty()) {
+    lo_x = hi_x = oracle[0].x;
+    lo_y = hi_y = oracle[0].y;
+    for (const SpatialEntry& e : oracle) {
+      lo_x = std::min(lo_x, e.x);
+      hi_x = std::max(hi_x, e.x);
+      lo_y = std::min(lo_y, e.y);
+      hi_y = std::max(hi_y, e.y);
+    }
+  }
+  const double extent = std::max({hi_x - lo_x, hi_y - lo_y, 1.0});
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const double radii[] = {0.0, 1e-3, 0.5, 3.0, 20.0, 0.05 * extent, 0.3 * extent, 3.0 * extent};
+  for (int q = 0; q < queries; ++q) {
+    Query query;
+    if (!oracle.empty() && q % 2 == 0) {
+      const SpatialEntry& e = oracle[rng() % oracle.size()];
+      const double jitter = (q % 4 == 0) ? 0.0 : radii[rng() % 6];
+      query = {e.x + jitter * (unit(rng) - 0.5), e.y + jitter * (unit(rng) - 0.5), 0.0};
+    } else {
+      query = {lo_x - 0.1 * extent + 1.2 * extent * unit(rng),
+               lo_y - 0.1 * extent + 1.2 * extent * unit(rng), 0.0};
+    }
+    query.r = radii[rng() % std::size(radii)] * (q % 3 == 0 ? 1.0 : unit(rng));
+    std::vector<SpatialEntry> got;
+    index.within(query.x, query.y, query.r, [&](const SpatialEntry& e) { got.push_back(e); });
+    if (sorted(got) != brute_within(oracle, query.x, query.y, query.r)) {
+      return ::testing::AssertionFailure()
+             << "within(" << query.x << ", " << query.y << ", " << query.r << "): " << got.size()
+             << " entries, brute force " << brute_within(oracle, query.x, query.y, query.r).size();
+    }
+    const double heading = (unit(rng) - 0.5) * 4.0 * std::numbers::pi;
+    const double fov = (q % 5 == 0) ? 2.0 * std::numbers::pi : unit(rng) * 1.5 * std::numbers::pi;
+    got.clear();
+    index.in_footprint(query.x, query.y, heading, query.r, fov,
+                       [&](const SpatialEntry& e) { got.push_back(e); });
+    if (sorted(got) != brute_footprint(oracle, query.x, query.y, heading, query.r, fov)) {
+      return ::testing::AssertionFailure() << "in_footprint(" << query.x << ", " << query.y
+                                           << ", " << heading << ", " << query.r << ", " << fov
+                                           << ")";
+    }
+    const std::size_t k = std::size_t{1} + rng() % 12;
+    std::vector<SpatialEntry> near(k + 2);
+    const std::size_t n = index.nearest(query.x, query.y, k, near);
+    std::vector<double> expected;
+    for (const SpatialEntry& e : oracle) {
+      expected.push_back(d2(e, query.x, query.y));
+    }
+    std::sort(expected.begin(), expected.end());
+    expected.resize(std::min(k, expected.size()));
+    if (n != expected.size()) {
+      return ::testing::AssertionFailure() << "nearest returns " << n << ", expected "
+                                           << expected.size();
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      if (d2(near[i], query.x, query.y) != expected[i] ||
+          std::find(oracle.begin(), oracle.end(), near[i]) == oracle.end()) {
+        return ::testing::AssertionFailure() << "nearest: rank " << i << " of " << n;
+      }
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Maps and changes
+
+enum class Kind { kUniform, kClustered, kDuplicates, kGrid, kHuge };
+
+const char* kind_name(Kind kind) {
+  switch (kind) {
+    case Kind::kUniform: return "uniform";
+    case Kind::kClustered: return "clustered";
+    case Kind::kDuplicates: return "duplicates";
+    case Kind::kGrid: return "grid";
+    case Kind::kHuge: return "huge";
+  }
+  return "?";
+}
+
+// A point of the given kind of map.
+std::pair<double, double> random_point(Kind kind, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  switch (kind) {
+    case Kind::kUniform:
+      return {-500.0 + 1000.0 * unit(rng), -500.0 + 1000.0 * unit(rng)};
+    case Kind::kClustered: {
+      // Eight tight clusters (sigma 2 cm .. 2 m) around fixed centres.
+      const int c = static_cast<int>(rng() % 8);
+      std::normal_distribution<double> spread(0.0, 0.02 * std::pow(2.0, c));
+      return {100.0 * c + spread(rng), -37.5 * c + spread(rng)};
+    }
+    case Kind::kDuplicates: {
+      // A few exact positions, many entries each (leaves at the finest size grow).
+      static constexpr double kSpots[][2] = {{0.0, 0.0}, {1.5, -2.25}, {1.5, -2.2500001}, {-3, 7}};
+      const auto& spot = kSpots[rng() % 4];
+      return {spot[0], spot[1]};
+    }
+    case Kind::kGrid: {
+      // Integer and half-integer points, many on power-of-two cell boundaries.
+      const double step = (rng() % 2 == 0) ? 16.0 : 0.5;
+      return {step * static_cast<double>(static_cast<int>(rng() % 41) - 20),
+              step * static_cast<double>(static_cast<int>(rng() % 41) - 20)};
+    }
+    case Kind::kHuge: {
+      const double scale = std::pow(10.0, static_cast<double>(rng() % 15) * 10.0);  // 1 .. 1e140
+      return {scale * (unit(rng) - 0.5), scale * (unit(rng) - 0.5)};
+    }
+  }
+  return {0.0, 0.0};
+}
+
+// One random change of `index`, mirrored in `oracle`: insert, erase, or a move (small, by
+// metres, or anywhere).
+template <class Index>
+void random_change(Index& index, Oracle& oracle, Kind kind, Slot& next_slot,
+                   std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const unsigned op = static_cast<unsigned>(rng() % 10);
+  if (oracle.empty() || op < 3) {
+    const auto [x, y] = random_point(kind, rng);
+    index.insert(next_slot, x, y);
+    oracle.push_back({next_slot++, x, y});
+    return;
+  }
+  const std::size_t i = rng() % oracle.size();
+  SpatialEntry& e = oracle[i];
+  if (op < 5) {
+    index.erase(e.slot, e.x, e.y);
+    e = oracle.back();
+    oracle.pop_back();
+    return;
+  }
+  double x;
+  double y;
+  if (op < 7) {
+    x = e.x + 0.05 * unit(rng);  // an EKF update
+    y = e.y + 0.05 * unit(rng);
+  } else if (op < 9) {
+    x = e.x + 8.0 * unit(rng);  // a loop closure
+    y = e.y + 8.0 * unit(rng);
+  } else {
+    std::tie(x, y) = random_point(kind, rng);
+  }
+  index.move(e.slot, e.x, e.y, x, y);
+  e.x = x;
+  e.y = y;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Suites over shapes (4- and 16-way, leaves of 8 and 16, atomic and plain counts) and heaps.
+
+template <class P, class H>
+struct Config {
+  using Index = BasicSpatialIndex<P>;
+  using Heap = H;
+};
+
+template <class C>
+class SpatialIndexTest : public ::testing::Test {
+ protected:
+  using IndexType = typename C::Index;
+  void TearDown() override {
+    const HeapStats stats = heap_.stats();
+    EXPECT_EQ(stats.live_nodes, 0) << "nodes leaked";
+    EXPECT_EQ(stats.live_bytes, 0) << "bytes leaked";
+  }
+  typename C::Heap heap_;
+};
+
+using Configs =
+    ::testing::Types<Config<DefaultSpatialPolicy, PoolHeap>,
+                     Config<SpatialPolicy<1, 8, LocalRefcount>, MallocHeap>,
+                     Config<SpatialPolicy<2, 16, AtomicRefcount>, MallocHeap>,
+                     Config<SpatialPolicy<2, 8, AtomicRefcount>, PoolHeap>>;
+TYPED_TEST_SUITE(SpatialIndexTest, Configs);
+
+TYPED_TEST(SpatialIndexTest, EmptyIndexFindsNothing) {
+  typename TestFixture::IndexType index(this->heap_);
+  int visited = 0;
+  index.within(0.0, 0.0, 1e9, [&](const SpatialEntry&) { ++visited; });
+  index.in_footprint(0.0, 0.0, 0.0, 1e9, 1.0, [&](const SpatialEntry&) { ++visited; });
+  std::vector<SpatialEntry> out(3);
+  EXPECT_EQ(index.nearest(0.0, 0.0, 3, out), 0u);
+  EXPECT_EQ(visited, 0);
+  EXPECT_THROW(index.erase(0, 0.0, 0.0), std::out_of_range);
+  EXPECT_THROW(index.move(0, 0.0, 0.0, 1.0, 1.0), std::out_of_range);
+  EXPECT_EQ(index.depth(), 0u);
+}
+
+TYPED_TEST(SpatialIndexTest, RandomMapsMatchBruteForce) {
+  for (Kind kind : {Kind::kUniform, Kind::kClustered, Kind::kDuplicates, Kind::kGrid,
+                    Kind::kHuge}) {
+    SCOPED_TRACE(kind_name(kind));
+    std::mt19937_64 rng(1234 + static_cast<int>(kind));
+    typename TestFixture::IndexType index(this->heap_);
+    Oracle oracle;
+    Slot next = 0;
+    const int n = sized(1500, 300);
+    for (int i = 0; i < n; ++i) {
+      const auto [x, y] = random_point(kind, rng);
+      index.insert(next, x, y);
+      oracle.push_back({next++, x, y});
+    }
+    ASSERT_TRUE(same_as_brute_force(index, oracle, rng, sized(120, 30)));
+    for (int round = 0; round < 6; ++round) {
+      for (int i = 0; i < n / 2; ++i) {
+        random_change(index, oracle, kind, next, rng);
+      }
+      ASSERT_TRUE(same_as_brute_force(index, oracle, rng, sized(60, 15))) << "round " << round;
+    }
+    // Remove everything: the index is empty again and frees every node.
+    while (!oracle.empty()) {
+      const SpatialEntry e = oracle.back();
+      oracle.pop_back();
+      index.erase(e.slot, e.x, e.y);
+    }
+    EXPECT_TRUE(same_as_brute_force(index, oracle, rng, 3));
+    EXPECT_EQ(this->heap_.stats().live_nodes, 0);
+  }
+}
+
+TYPED_TEST(SpatialIndexTest, GridQueriesExactlyOnTheRadius) {
+  // Integer points and integer radii: squared distances are exact, so "distance <= radius"
+  // has no rounding slack to hide behind; the points lie on every power-of-two cell boundary.
+  typename TestFixture::IndexType index(this->heap_);
+  Oracle oracle;
+  Slot slot = 0;
+  for (int x = -40; x <= 40; ++x) {
+    for (int y = -40; y <= 40; y += 1) {
+      index.insert(slot, x, y);
+      oracle.push_back({slot++, static_cast<double>(x), static_cast<double>(y)});
+    }
+  }
+  for (double qx : {0.0, 16.0, -32.0, 7.0, 8.0}) {
+    for (double qy : {0.0, 16.0, -8.0, 5.0}) {
+      for (double r : {0.0, 1.0, 5.0, 8.0, 13.0, 16.0, 25.0}) {
+        std::vector<SpatialEntry> got;
+        index.within(qx, qy, r, [&](const SpatialEntry& e) { got.push_back(e); });
+        ASSERT_EQ(sorted(got), brute_within(oracle, qx, qy, r)) << qx << " " << qy << " " << r;
+        got.clear();
+        index.in_footprint(qx, qy, std::numbers::pi / 2, r, std::numbers::pi / 2,
+                           [&](const SpatialEntry& e) { got.push_back(e); });
+        ASSERT_EQ(sorted(got), brute_footprint(oracle, qx, qy, std::numbers::pi / 2, r,
+                                               std::numbers::pi / 2));
+      }
+    }
+  }
+}
+
+TYPED_TEST(SpatialIndexTest, RootGrowsAndShrinks) {
+  typename TestFixture::IndexType index(this->heap_);
+  Oracle oracle;
+  std::mt19937_64 rng(7);
+  Slot slot = 0;
+  for (double scale = 1.0; scale < 1e149; scale *= 37.0) {
+    for (const auto& [sx, sy] : {std::pair{1.0, 1.0}, {-1.0, 0.5}, {0.25, -1.0}, {-1.0, -1.0}}) {
+      index.insert(slot, sx * scale, sy * scale);
+      oracle.push_back({slot++, sx * scale, sy * scale});
+    }
+    ASSERT_TRUE(same_as_brute_force(index, oracle, rng, 10)) << scale;
+  }
+  const unsigned grown = index.depth();
+  // Keep only the small points: merges and root hand-overs bring the depth back down.
+  while (std::fabs(oracle.back().x) > 100.0) {
+    index.erase(oracle.back().slot, oracle.back().x, oracle.back().y);
+    oracle.pop_back();
+  }
+  EXPECT_TRUE(same_as_brute_force(index, oracle, rng, 20));
+  EXPECT_LT(index.depth(), grown);
+  EXPECT_LE(index.depth(), 3u);
+  // Coordinates beyond kMaxCoordinate, or not finite, are refused and change nothing.
+  const double bad[] = {std::numeric_limits<double>::quiet_NaN(),
+                        std::numeric_limits<double>::infinity(), -1e151};
+  for (double b : bad) {
+    EXPECT_THROW(index.insert(99, b, 0.0), std::invalid_argument);
+    EXPECT_THROW(index.insert(99, 0.0, b), std::invalid_argument);
+    EXPECT_THROW(index.move(oracle[0].slot, oracle[0].x, oracle[0].y, b, 1.0),
+                 std::invalid_argument);
+  }
+  EXPECT_THROW(index.erase(oracle[0].slot, oracle[0].x + 1e-9, oracle[0].y), std::out_of_range);
+  EXPECT_THROW(index.erase(oracle[0].slot + 1000, oracle[0].x, oracle[0].y), std::out_of_range);
+  EXPECT_THROW(index.move(oracle[0].slot, oracle[0].x, 1e6, 0.0, 0.0), std::out_of_range);
+  EXPECT_TRUE(same_as_brute_force(index, oracle, rng, 20));
+}
+
+TYPED_TEST(SpatialIndexTest, CopiesChangeIndependently) {
+  using Index = typename TestFixture::IndexType;
+  std::mt19937_64 rng(99);
+  for (Kind kind : {Kind::kUniform, Kind::kClustered, Kind::kDuplicates}) {
+    SCOPED_TRACE(kind_name(kind));
+    Index base(this->heap_);
+    Oracle base_oracle;
+    Slot next = 0;
+    for (int i = 0; i < sized(800, 200); ++i) {
+      random_change(base, base_oracle, kind, next, rng);
+    }
+    const std::int64_t base_nodes = this->heap_.stats().live_nodes;
+    std::vector<Index> copies(12, base);
+    std::vector<Oracle> oracles(copies.size(), base_oracle);
+    EXPECT_EQ(this->heap_.stats().live_nodes, base_nodes);  // copies are O(1)
+    for (std::size_t c = 0; c < copies.size(); ++c) {
+      EXPECT_TRUE(copies[c].shares_root_with(base));
+      Slot slots = next;
+      for (std::size_t i = 0; i < 10 * c + 1; ++i) {
+        random_change(copies[c], oracles[c], kind, slots, rng);
+      }
+    }
+    for (std::size_t c = 0; c < copies.size(); ++c) {
+      ASSERT_TRUE(same_as_brute_force(copies[c], oracles[c], rng, sized(30, 8))) << "copy " << c;
+    }
+    ASSERT_TRUE(same_as_brute_force(base, base_oracle, rng, sized(30, 8)));
+    copies.clear();
+    EXPECT_EQ(this->heap_.stats().live_nodes, base_nodes);
+  }
+}
+
+TYPED_TEST(SpatialIndexTest, ResamplingGathers) {
+  using Index = typename TestFixture::IndexType;
+  std::mt19937_64 rng(5);
+  const std::size_t particles = sized(24, 8);
+  std::vector<Index> indexes(particles, Index(this->heap_));
+  std::vector<Oracle> oracles(particles);
+  std::vector<Slot> next(particles, 0);
+  for (int step = 0; step < sized(40, 12); ++step) {
+    for (std::size_t p = 0; p < particles; ++p) {
+      for (int i = 0; i < 15; ++i) {
+        random_change(indexes[p], oracles[p], Kind::kClustered, next[p], rng);
+      }
+    }
+    // A gather by random ancestors, as resampling does (some particles copied many times).
+    std::vector<std::size_t> ancestor(particles);
+    for (std::size_t& a : ancestor) {
+      a = rng() % (particles / 3 + 1);
+    }
+    std::vector<Index> gathered;
+    std::vector<Oracle> gathered_oracles;
+    std::vector<Slot> gathered_next;
+    for (std::size_t a : ancestor) {
+      gathered.push_back(indexes[a]);
+      gathered_oracles.push_back(oracles[a]);
+      gathered_next.push_back(next[a]);
+    }
+    indexes = std::move(gathered);
+    oracles = std::move(gathered_oracles);
+    next = std::move(gathered_next);
+    if (step % 8 == 7) {
+      for (std::size_t p = 0; p < particles; ++p) {
+        ASSERT_TRUE(same_as_brute_force(indexes[p], oracles[p], rng, 6)) << step << " " << p;
+      }
+    }
+  }
+}
+
+TYPED_TEST(SpatialIndexTest, StrongGuaranteeOnAllocationFailure) {
+  using Index = typename TestFixture::IndexType;
+  FailingHeap failing(this->heap_);
+  std::mt19937_64 rng(11);
+  // Each case: a fresh index (shared with a base copy, so changes must copy paths) and one
+  // operation; the operation is failed at its 1st, 2nd, ... allocation until it succeeds.
+  for (int variant = 0; variant < 8; ++variant) {
+    int failed = 0;
+    for (std::int64_t k = 1;; ++k) {
+      Index base(failing);
+      Oracle oracle;
+      Slot next = 0;
+      for (int i = 0; i < 300; ++i) {
+        random_change(base, oracle, variant % 2 == 0 ? Kind::kUniform : Kind::kClustered, next,
+                      rng);
+      }
+      Index index = base;
+      if (variant >= 4) {
+        index = Index(failing);  // unshared: in-place changes, splits and merges
+        for (const SpatialEntry& e : oracle) {
+          index.insert(e.slot, e.x, e.y);
+        }
+      }
+      const SpatialEntry target = oracle[rng() % oracle.size()];
+      const auto [px, py] = random_point(Kind::kUniform, rng);
+      failing.fail_at(k);
+      bool threw = false;
+      try {
+        switch (variant % 4) {
+          case 0: index.insert(next, target.x + 1e-6, target.y); break;  // likely splits
+          case 1: index.erase(target.slot, target.x, target.y); break;
+          case 2: index.move(target.slot, target.x, target.y, px, py); break;
+          default: index.move(target.slot, target.x, target.y, target.x + 1e-7, target.y);
+        }
+      } catch (const std::bad_alloc&) {
+        threw = true;
+      }
+      failing.disarm();
+      if (threw) {
+        ASSERT_TRUE(same_as_brute_force(index, oracle, rng, 4)) << variant << " at " << k;
+      }
+      ASSERT_TRUE(same_as_brute_force(base, oracle, rng, 2)) << variant << " at " << k;
+      if (!threw) {
+        break;
+      }
+      ++failed;
+    }
+    if (variant < 4) {
+      EXPECT_GT(failed, 0) << "variant " << variant << ": a shared change must allocate";
+    }
+  }
+  // Erasing down to a merge, failing every allocation: erase never fails once it owns its
+  // path (a merge that cannot allocate is skipped), and the index stays exact.
+  Index index(failing);
+  Oracle oracle;
+  Slot next = 0;
+  for (int i = 0; i < 200; ++i) {
+    random_change(index, oracle, Kind::kClustered, next, rng);
+  }
+  failing.fail_at(1);
+  while (!oracle.empty()) {
+    const SpatialEntry e = oracle.back();
+    oracle.pop_back();
+    index.erase(e.slot, e.x, e.y);  // owned path: no allocation but the merge's
+    failing.fail_at(1);
+  }
+  failing.disarm();
+  EXPECT_TRUE(same_as_brute_force(index, oracle, rng, 2));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Node counts of path copying (default shape)
+
+TEST(SpatialIndexNodes, HundredCopiesTenMovesEach) {
+  PoolHeap heap;
+  std::mt19937_64 rng(3);
+  SpatialIndex base(heap);
+  Oracle oracle;
+  const int n = sized(50000, 5000);
+  const double side = std::sqrt(static_cast<double>(n)) * 10.0;
+  std::uniform_real_distribution<double> u(0.0, side);
+  for (int i = 0; i < n; ++i) {
+    const double x = u(rng);
+    const double y = u(rng);
+    base.insert(static_cast<Slot>(i), x, y);
+    oracle.push_back({static_cast<Slot>(i), x, y});
+  }
+  const std::int64_t base_nodes = heap.stats().live_nodes;
+  std::vector<SpatialIndex> handles(100, base);
+  std::int64_t expected = base_nodes;
+  for (SpatialIndex& handle : handles) {
+    // Ten moves inside their leaves' squares: each copies the nodes of its path that this
+    // handle does not own yet, so the handle owns exactly the union of the ten paths.
+    std::set<const void*> paths;
+    for (int m = 0; m < 10; ++m) {
+      const SpatialEntry& e = oracle[rng() % oracle.size()];
+      base.for_each_path_node(e.x, e.y, [&](const void* node) { paths.insert(node); });
+      handle.move(e.slot, e.x, e.y, e.x, e.y);  // same position: an in-place write
+    }
+    expected += static_cast<std::int64_t>(paths.size());
+  }
+  EXPECT_EQ(heap.stats().live_nodes, expected);
+  // The union of ten paths is at most ten paths long; the root is always among them.
+  EXPECT_LE(expected - base_nodes, 100 * 10 * static_cast<std::int64_t>(base.depth()));
+  handles.clear();
+  EXPECT_EQ(heap.stats().live_nodes, base_nodes);
+  // Moves by metres leave their leaves: new nodes are bounded by the two paths plus a split.
+  std::vector<SpatialIndex> movers(20, base);
+  Oracle moved = oracle;
+  for (SpatialIndex& handle : movers) {
+    const std::int64_t before = heap.stats().live_nodes;
+    SpatialEntry& e = moved[rng() % moved.size()];
+    const double to_x = std::clamp(e.x + 5.0, 0.0, side - 1.0);
+    handle.move(e.slot, e.x, e.y, to_x, e.y);
+    const std::int64_t grown = heap.stats().live_nodes - before;
+    EXPECT_LE(grown, 2 * static_cast<std::int64_t>(base.depth()) + 4 + 4);
+  }
+  movers.clear();
+  EXPECT_EQ(heap.stats().live_nodes, base_nodes);
+  base = SpatialIndex(heap);
+  EXPECT_EQ(heap.stats().live_nodes, 0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Concurrency: particles copying, querying, changing and releasing shared indexes at once.
+
+TEST(SpatialIndexConcurrency, ParticlesShareCopyChangeAndRelease) {
+  PoolHeap heap;
+  parallel::ParticleKernel kernel({.threads = 4, .grain = 1});
+  const std::size_t particles = sized<std::size_t>(48, 16);
+  const int steps = sized(12, 4);
+  std::mt19937_64 seed_rng(21);
+  // A few shared bases.
+  std::vector<SpatialIndex> indexes;
+  std::vector<Oracle> oracles;
+  for (std::size_t b = 0; b < 4; ++b) {
+    SpatialIndex base(heap);
+    Oracle oracle;
+    Slot next = 0;
+    for (int i = 0; i < sized(600, 150); ++i) {
+      random_change(base, oracle, Kind::kClustered, next, seed_rng);
+    }
+    indexes.push_back(base);
+    oracles.push_back(oracle);
+  }
+  std::atomic<int> failures{0};
+  for (int step = 0; step < steps; ++step) {
+    // Gather: particle p descends from index p * 7 % size (many particles share one).
+    std::vector<SpatialIndex> next_indexes(particles, SpatialIndex(heap));
+    std::vector<Oracle> next_oracles(particles);
+    kernel.for_each_particle(particles, [&](std::size_t p) {
+      const std::size_t parent = (p * 7 + static_cast<std::size_t>(step)) % indexes.size();
+      SpatialIndex mine = indexes[parent];  // concurrent copies of shared roots
+      Oracle oracle = oracles[parent];
+      std::mt19937_64 rng(static_cast<std::uint64_t>(step) * 1000003 + p);
+      Slot next = 1u << 20 | static_cast<Slot>(p << 10 | static_cast<std::size_t>(step) << 16);
+      for (int i = 0; i < 20; ++i) {
+        random_change(mine, oracle, Kind::kClustered, next, rng);
+      }
+      // Read the parent (shared, being copied by others) and the own copy.
+      if (!same_as_brute_force(mine, oracle, rng, 3) ||
+          !same_as_brute_force(indexes[parent], oracles[parent], rng, 1)) {
+        failures.fetch_add(1);
+      }
+      next_indexes[p] = std::move(mine);
+      next_oracles[p] = std::move(oracle);
+    });
+    // Release the old generation from many threads at once.
+    kernel.for_each_particle(indexes.size(), [&](std::size_t p) {
+      indexes[p] = SpatialIndex(heap);
+    });
+    indexes = std::move(next_indexes);
+    oracles = std::move(next_oracles);
+  }
+  EXPECT_EQ(failures.load(), 0);
+  kernel.for_each_particle(indexes.size(), [&](std::size_t p) { indexes[p].clear(); });
+  EXPECT_EQ(heap.stats().live_nodes, 0);
+}
+
+}  // namespace
+}  // namespace fastslam::memory
