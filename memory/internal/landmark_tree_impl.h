@@ -17,8 +17,9 @@ namespace internal {
 template <class P>
 BasicLandmarkTree<P>::BasicLandmarkTree(const BasicLandmarkTree& other) noexcept
     : root_(other.root_), heap_(other.heap_), height_(other.height_), size_(other.size_) {
-  if (root_ != nullptr) { root_->refs.acquire();
-}
+  if (root_ != nullptr) {
+    root_->refs.acquire();
+  }
 }
 
 template <class P>
@@ -31,8 +32,9 @@ BasicLandmarkTree<P>::BasicLandmarkTree(BasicLandmarkTree&& other) noexcept
 template <class P>
 BasicLandmarkTree<P>& BasicLandmarkTree<P>::operator=(const BasicLandmarkTree& other) noexcept {
   if (this != &other) {
-    if (other.root_ != nullptr) { other.root_->refs.acquire();
-}
+    if (other.root_ != nullptr) {
+      other.root_->refs.acquire();
+    }
     release(root_, height_, *heap_);
     root_ = other.root_;
     heap_ = other.heap_;
@@ -73,32 +75,37 @@ std::uint64_t BasicLandmarkTree<P>::capacity() const noexcept {
 
 template <class P>
 std::uint32_t BasicLandmarkTree<P>::live_of(const Node* node, unsigned height) noexcept {
-  if (node == nullptr) { return 0;
-}
+  if (node == nullptr) {
+    return 0;
+  }
   return height == 0 ? static_cast<std::uint32_t>(std::popcount(node->aux)) : node->aux;
 }
 
 template <class P>
 const Landmark* BasicLandmarkTree<P>::find(Slot slot) const noexcept {
-  if (root_ == nullptr || slot >= capacity_at(height_)) { return nullptr;
-}
+  if (root_ == nullptr || slot >= capacity_at(height_)) {
+    return nullptr;
+  }
   const Node* node = root_;
   for (unsigned h = height_; h > 0; --h) {
     node = static_cast<const Inner*>(node)->child[child_index(slot, h)];
-    if (node == nullptr) { return nullptr;
-}
+    if (node == nullptr) {
+      return nullptr;
+    }
   }
   const unsigned i = slot & (kLeafWidth - 1);
-  if ((node->aux >> i & 1u) == 0) { return nullptr;
-}
+  if ((node->aux >> i & 1u) == 0) {
+    return nullptr;
+  }
   return &static_cast<const Leaf*>(node)->landmarks[i];
 }
 
 template <class P>
 const Landmark& BasicLandmarkTree<P>::at(Slot slot) const {
   const Landmark* landmark = find(slot);
-  if (landmark == nullptr) { internal::throw_empty_slot(slot, capacity(), "at");
-}
+  if (landmark == nullptr) {
+    internal::throw_empty_slot(slot, capacity(), "at");
+  }
   return *landmark;
 }
 
@@ -111,18 +118,21 @@ T* BasicLandmarkTree<P>::make(Args&&... args) {
 
 template <class P>
 auto BasicLandmarkTree<P>::own(Node* node, unsigned height) -> Node* {
-  if (node == nullptr) { return height == 0 ? static_cast<Node*>(make<Leaf>()) : make<Inner>();
-}
-  if (node->refs.unique()) { return node;
-}
+  if (node == nullptr) {
+    return height == 0 ? static_cast<Node*>(make<Leaf>()) : make<Inner>();
+  }
+  if (node->refs.unique()) {
+    return node;
+  }
   Node* copy;
   if (height == 0) {
     copy = make<Leaf>(*static_cast<const Leaf*>(node));
   } else {
     auto* inner = make<Inner>(*static_cast<const Inner*>(node));
     for (Node* child : inner->child) {
-      if (child != nullptr) { child->refs.acquire();
-}
+      if (child != nullptr) {
+        child->refs.acquire();
+      }
     }
     copy = inner;
   }
@@ -143,8 +153,9 @@ void BasicLandmarkTree<P>::free_node(Node* node, unsigned height, NodeHeap& heap
 
 template <class P>
 void BasicLandmarkTree<P>::release(Node* node, unsigned height, NodeHeap& heap) noexcept {
-  if (node == nullptr || !node->refs.release()) { return;
-}
+  if (node == nullptr || !node->refs.release()) {
+    return;
+  }
   // Depth-first with an explicit stack: at most kInnerWidth - 1 pending siblings per level.
   struct Pending {
     Node* node;
@@ -158,8 +169,9 @@ void BasicLandmarkTree<P>::release(Node* node, unsigned height, NodeHeap& heap) 
     if (next.height > 0) {
       auto* inner = static_cast<Inner*>(next.node);
       for (Node* child : inner->child) {
-        if (child != nullptr && child->refs.release()) { stack[top++] = {child, next.height - 1};
-}
+        if (child != nullptr && child->refs.release()) {
+          stack[top++] = {child, next.height - 1};
+        }
       }
     }
     free_node(next.node, next.height, heap);
@@ -182,8 +194,9 @@ auto BasicLandmarkTree<P>::own_path(Slot slot, std::array<Inner*, kMaxHeight>& p
 
 template <class P>
 Landmark& BasicLandmarkTree<P>::edit(Slot slot) {
-  if (find(slot) == nullptr) { internal::throw_empty_slot(slot, capacity(), "edit");
-}
+  if (find(slot) == nullptr) {
+    internal::throw_empty_slot(slot, capacity(), "edit");
+  }
   std::array<Inner*, kMaxHeight> path;
   Leaf* leaf = own_path(slot, path);
   return leaf->landmarks[slot & (kLeafWidth - 1)];
@@ -191,23 +204,27 @@ Landmark& BasicLandmarkTree<P>::edit(Slot slot) {
 
 template <class P>
 std::uint64_t BasicLandmarkTree<P>::lowest_free_slot() const noexcept {
-  if (root_ == nullptr) { return 0;
-}
+  if (root_ == nullptr) {
+    return 0;
+  }
   const std::uint64_t cap = capacity_at(height_);
-  if (live_of(root_, height_) == cap) { return cap;
-}
+  if (live_of(root_, height_) == cap) {
+    return cap;
+  }
   const Node* node = root_;
   std::uint64_t base = 0;
   for (unsigned h = height_; h > 0; --h) {
     const auto* inner = static_cast<const Inner*>(node);
     const std::uint64_t child_cap = capacity_at(h - 1);
     unsigned i = 0;
-    while (inner->child[i] != nullptr && live_of(inner->child[i], h - 1) == child_cap) { ++i;
-}
+    while (inner->child[i] != nullptr && live_of(inner->child[i], h - 1) == child_cap) {
+      ++i;
+    }
     base += i * child_cap;
     node = inner->child[i];
-    if (node == nullptr) { return base;
-}
+    if (node == nullptr) {
+      return base;
+    }
   }
   return base + static_cast<unsigned>(std::countr_one(node->aux));
 }
@@ -217,8 +234,9 @@ Slot BasicLandmarkTree<P>::insert(const Landmark& landmark) {
   std::uint64_t slot = lowest_free_slot();
   if (root_ != nullptr && slot == capacity_at(height_)) {
     // Full: a new root above the old one; the old root becomes its first child.
-    if (height_ + 1 > kMaxHeight) { throw std::length_error("LandmarkTree::insert: 2^32 slots used");
-}
+    if (height_ + 1 > kMaxHeight) {
+      throw std::length_error("LandmarkTree::insert: 2^32 slots used");
+    }
     Inner* top = make<Inner>();
     top->child[0] = root_;
     top->aux = size_;
@@ -236,21 +254,24 @@ Slot BasicLandmarkTree<P>::insert(const Landmark& landmark) {
   const unsigned i = static_cast<unsigned>(slot) & (kLeafWidth - 1);
   leaf->landmarks[i] = landmark;
   leaf->aux |= 1u << i;
-  for (unsigned k = 0; k < height_; ++k) { ++path[k]->aux;
-}
+  for (unsigned k = 0; k < height_; ++k) {
+    ++path[k]->aux;
+  }
   ++size_;
   return static_cast<Slot>(slot);
 }
 
 template <class P>
 void BasicLandmarkTree<P>::erase(Slot slot) {
-  if (find(slot) == nullptr) { internal::throw_empty_slot(slot, capacity(), "erase");
-}
+  if (find(slot) == nullptr) {
+    internal::throw_empty_slot(slot, capacity(), "erase");
+  }
   std::array<Inner*, kMaxHeight> path;
   Leaf* leaf = own_path(slot, path);  // on bad_alloc: same contents, nothing to undo
   leaf->aux &= ~(1u << (slot & (kLeafWidth - 1)));
-  for (unsigned k = 0; k < height_; ++k) { --path[k]->aux;
-}
+  for (unsigned k = 0; k < height_; ++k) {
+    --path[k]->aux;
+  }
   --size_;
   prune(slot);
 }
@@ -281,18 +302,21 @@ void BasicLandmarkTree<P>::prune(Slot slot) noexcept {
   while (root_ != nullptr && height_ > 0) {
     auto* top = static_cast<Inner*>(root_);
     bool only_first = true;
-    for (unsigned i = 1; i < kInnerWidth; ++i) { only_first = only_first && top->child[i] == nullptr;
-}
-    if (!only_first || !top->refs.unique()) { break;
-}
+    for (unsigned i = 1; i < kInnerWidth; ++i) {
+      only_first = only_first && top->child[i] == nullptr;
+    }
+    if (!only_first || !top->refs.unique()) {
+      break;
+    }
     Node* first = top->child[0];
     top->child[0] = nullptr;
     free_node(top, height_, *heap_);
     root_ = first;
     --height_;
   }
-  if (root_ == nullptr) { height_ = 0;
-}
+  if (root_ == nullptr) {
+    height_ = 0;
+  }
 }
 
 template <class P>
@@ -315,8 +339,9 @@ auto BasicLandmarkTree<P>::end() const noexcept -> Iterator {
 template <class P>
 void BasicLandmarkTree<P>::Iterator::seek(std::uint64_t from) noexcept {
   leaf_ = nullptr;
-  if (root_ == nullptr) { return;
-}
+  if (root_ == nullptr) {
+    return;
+  }
   const std::uint64_t cap = capacity_at(height_);
   while (from < cap) {
     const Node* node = root_;
@@ -326,21 +351,24 @@ void BasicLandmarkTree<P>::Iterator::seek(std::uint64_t from) noexcept {
       const unsigned shift = kLeafBits + kInnerBits * (h - 1);
       unsigned i = static_cast<unsigned>(from >> shift) & (kInnerWidth - 1);
       const unsigned first = i;
-      while (i < kInnerWidth && inner->child[i] == nullptr) { ++i;
-}
+      while (i < kInnerWidth && inner->child[i] == nullptr) {
+        ++i;
+      }
       if (i == kInnerWidth) {
         // Nothing left under this node: continue after its whole range.
         from = ((from >> (shift + kInnerBits)) + 1) << (shift + kInnerBits);
         restart = true;
       } else {
-        if (i != first) { from = ((from >> (shift + kInnerBits)) << (shift + kInnerBits)) |
-                               (std::uint64_t{i} << shift);
-}
+        if (i != first) {
+          from = ((from >> (shift + kInnerBits)) << (shift + kInnerBits)) |
+                 (std::uint64_t{i} << shift);
+        }
         node = inner->child[i];
       }
     }
-    if (restart) { continue;
-}
+    if (restart) {
+      continue;
+    }
     const unsigned offset = static_cast<unsigned>(from) & (kLeafWidth - 1);
     const std::uint32_t bits = node->aux >> offset;
     if (bits != 0) {

@@ -33,21 +33,25 @@ void thread_fork_join(unsigned threads, std::size_t blocks, RunBlock&& run_block
         run_block(b);
       } catch (...) {
         std::lock_guard lock(error_mutex);
-        if (!error) { error = std::current_exception();
-}
+        if (!error) {
+          error = std::current_exception();
+        }
       }
     }
   };
   std::vector<std::thread> pool;
   const std::size_t extra = threads > 1 && blocks > 1 ? threads - 1 : 0;
   pool.reserve(extra);
-  for (std::size_t t = 0; t < extra; ++t) { pool.emplace_back(worker);
-}
+  for (std::size_t t = 0; t < extra; ++t) {
+    pool.emplace_back(worker);
+  }
   worker();
-  for (std::thread& thread : pool) { thread.join();
-}
-  if (error) { std::rethrow_exception(error);
-}
+  for (std::thread& thread : pool) {
+    thread.join();
+  }
+  if (error) {
+    std::rethrow_exception(error);
+  }
 }
 
 }  // namespace fastslam::parallel::internal
