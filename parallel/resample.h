@@ -64,6 +64,10 @@
 // O(N) uniforms (and logs) for stratified/multinomial; `resample` adds
 // ParticleStore::gather (O(M) plus freeing the maps that die). Allocation: the Resampler's
 // buffers on first use at a given size; the free functions allocate O(M) each call.
+// Measured (BM_SystematicResample, summary + systematic draw, 2-core EPYC VM, -O3 -march=native,
+// grain 512): about 6 ns per particle on one thread for M = 10^4 .. 10^6 (0.66 us at M = 100);
+// two threads 1.05x at M = 10^3, 1.75x at 10^4, 1.94x at 10^5, 2.0x at 10^6; M <= grain runs
+// inline (1.0x).
 #pragma once
 
 #include <cstddef>

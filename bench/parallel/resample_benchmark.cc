@@ -3,7 +3,7 @@
 // store (draw + gather + release of dead maps). Under FASTSLAM_BENCH_SMOKE=1 sizes stop at 10^3.
 //   BM_SystematicResample/M/threads      summarize + systematic draw of M indices
 //   BM_StratifiedResample, BM_MultinomialResample   the same for the other schemes
-//   BM_SystematicResampleGrain/M/grain   2 threads, grain swept (the default is 2048)
+//   BM_SystematicResampleGrain/M/grain   2 threads, grain swept (the default is 512)
 //   BM_ResampleStore/M/threads           Resampler::resample on a store with 8 landmarks each
 #include <algorithm>
 #include <cstdint>

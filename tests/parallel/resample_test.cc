@@ -473,9 +473,10 @@ TEST(Draw, ParallelEqualsSequentialBitForBit) {
     unsigned threads;
     std::size_t grain;
   };
-  const std::vector<Config> all = {{1, 1}, {1, 7}, {1, 256}, {1, 1000}, {1, 2048}, {1, 1 << 20},
-                                   {2, 1}, {2, 7}, {2, 256}, {2, 1000}, {2, 2048}, {2, 1 << 20}};
-  const std::vector<Config> some = {{1, 1 << 20}, {2, 1}, {2, 256}, {2, 2048}};
+  const std::vector<Config> all = {{1, 1},       {1, 7},    {1, 256},    {1, 1000}, {1, 2048},
+                                   {1, 1 << 20}, {2, 1},    {2, 7},      {2, 256},  {2, 512},
+                                   {2, 1000},    {2, 2048}, {2, 1 << 20}};
+  const std::vector<Config> some = {{1, 1 << 20}, {2, 1}, {2, 512}, {2, 2048}};
   // Every shape and configuration for sizes around the block size; a few for the large ones.
   for (std::size_t m : {1, 2, 3, 255, 256, 257, 1000, 4097, 65537, 100000}) {
     const bool large = m > 5000;
