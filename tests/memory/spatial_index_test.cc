@@ -24,50 +24,13 @@
 
 #include "memory/node_heap.h"
 #include "parallel/particle_kernel.h"
+#include "tests/memory/heap_fixtures.h"
 
 namespace fastslam::memory {
 namespace {
 
-#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
-constexpr bool kSanitized = true;
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer) || __has_feature(address_sanitizer)
-constexpr bool kSanitized = true;
-#else
-constexpr bool kSanitized = false;
-#endif
-#else
-constexpr bool kSanitized = false;
-#endif
-
-template <class T>
-constexpr T sized(T full, T small) {
-  return kSanitized ? small : full;
-}
-
-// Forwards to another heap and throws std::bad_alloc on the k-th allocation after `fail_at(k)`
-// (as tests/memory/heap_fixtures.h's, copied to keep this suite self-contained).
-class FailingHeap final : public NodeHeap {
- public:
-  explicit FailingHeap(NodeHeap& inner) : inner_(&inner) {}
-  void fail_at(std::int64_t k) { countdown_ = k; }
-  void disarm() { countdown_ = 0; }
-
- protected:
-  void* do_allocate(std::size_t bytes) override {
-    if (countdown_ > 0 && --countdown_ == 0) {
-      throw std::bad_alloc();
-    }
-    return inner_->allocate(bytes);
-  }
-  void do_deallocate(void* block, std::size_t bytes) noexcept override {
-    inner_->deallocate(block, bytes);
-  }
-
- private:
-  NodeHeap* inner_;
-  std::int64_t countdown_ = 0;
-};
+using testing::FailingHeap;
+using testing::sized;
 
 // ---------------------------------------------------------------------------------------------
 // The oracle: the entries in a vector, every query by brute force.
