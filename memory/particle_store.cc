@@ -63,7 +63,8 @@ ParticleStore::ParticleStore(std::size_t particles, NodeHeap& heap)
       v_(particles, 0.0),
       omega_(particles, 0.0),
       log_weight_(particles, 0.0),
-      maps_(particles, LandmarkTree(heap)) {}
+      maps_(particles, LandmarkTree(heap)),
+      indices_(particles, SpatialIndex(heap)) {}
 
 void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t grain) {
   const std::size_t from_size = size();
@@ -77,6 +78,7 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   const std::size_t m = index.size();
   Column nx(m), ny(m), ntheta(m), nv(m), nomega(m), nlog_weight(m);
   std::vector<LandmarkTree> nmaps(m, LandmarkTree(*heap_));
+  std::vector<SpatialIndex> nindices(m, SpatialIndex(*heap_));
   if (grain == 0) grain = 1;
   for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k != end; ++k) {
@@ -88,6 +90,7 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
       nomega[k] = omega_[i];
       nlog_weight[k] = log_weight_[i];
       nmaps[k] = maps_[i];  // bumps the root's count
+      nindices[k] = indices_[i];
     }
   });
   x_.swap(nx);
@@ -97,9 +100,14 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   omega_.swap(nomega);
   log_weight_.swap(nlog_weight);
   maps_.swap(nmaps);
-  // The old maps: each drops one reference; maps no survivor shares are freed, in parallel.
+  indices_.swap(nindices);
+  // The old maps and indices: each drops one reference; trees no survivor shares are freed, in
+  // parallel.
   for_blocks(nmaps.size(), grain, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t k = begin; k != end; ++k) nmaps[k].clear();
+    for (std::size_t k = begin; k != end; ++k) {
+      nmaps[k].clear();
+      nindices[k].clear();
+    }
   });
 }
 

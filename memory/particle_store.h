@@ -1,14 +1,16 @@
 // The particles of a filter, stored as columns (structure of arrays).
 //
 // Columns: pose x, y, theta; velocities v, omega (for the no-odometry model, eq. 79-81); the
-// log-weight; and each particle's map (a persistent `LandmarkTree`, whose size is the
-// particle's landmark count). The numeric columns are cache-line aligned, so loops over
-// particles vectorise. Resampling is `gather`: particle k of the result is particle index[k]
-// of the input; a map is shared by bumping its root's count, and every map that no output
-// particle holds is released exactly once (by its reference count), in parallel.
+// log-weight; each particle's map (a persistent `LandmarkTree`, whose size is the particle's
+// landmark count); and each particle's spatial index over that map (a persistent
+// `SpatialIndex`, empty unless the engine keeps one: unknown data association). The numeric
+// columns are cache-line aligned, so loops over particles vectorise. Resampling is `gather`:
+// particle k of the result is particle index[k] of the input; a map or index is shared by
+// bumping its root's count, and every tree that no output particle holds is released exactly
+// once (by its reference count), in parallel.
 //
-// Ownership: the store owns its columns and one reference to each particle's map; it borrows
-// the `NodeHeap` (which must outlive it).
+// Ownership: the store owns its columns and one reference to each particle's map and index;
+// it borrows the `NodeHeap` (which must outlive it).
 // Thread safety: thread-compatible. Distinct particles (columns entries, maps) may be written
 // by distinct threads at once; `gather` and `resize` need exclusive use of the store.
 // Costs: `gather` is O(M) time plus the frees of the maps that die, runs over TBB in the
@@ -24,6 +26,7 @@
 
 #include "memory/landmark_tree.h"
 #include "memory/node_heap.h"
+#include "memory/spatial_index.h"
 
 namespace fastslam::memory {
 
@@ -52,6 +55,8 @@ class ParticleStore {
 
   LandmarkTree& map(std::size_t particle) noexcept { return maps_[particle]; }
   const LandmarkTree& map(std::size_t particle) const noexcept { return maps_[particle]; }
+  SpatialIndex& index(std::size_t particle) noexcept { return indices_[particle]; }
+  const SpatialIndex& index(std::size_t particle) const noexcept { return indices_[particle]; }
   std::size_t landmark_count(std::size_t particle) const noexcept {
     return maps_[particle].size();
   }
@@ -66,6 +71,7 @@ class ParticleStore {
   NodeHeap* heap_;
   Column x_, y_, theta_, v_, omega_, log_weight_;
   std::vector<LandmarkTree> maps_;
+  std::vector<SpatialIndex> indices_;
 };
 
 }  // namespace fastslam::memory

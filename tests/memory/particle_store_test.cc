@@ -178,6 +178,39 @@ TYPED_TEST(ParticleStoreTest, GatherCopiesEveryColumnAndSharesEveryMap) {
   EXPECT_TRUE(this->matches(store, naive));
 }
 
+// The spatial index column travels with its particle: shared by root, entries unchanged, and
+// the indices no survivor holds are freed.
+TYPED_TEST(ParticleStoreTest, GatherSharesEverySpatialIndex) {
+  constexpr std::size_t kParticles = 6;
+  ParticleStore store(kParticles, this->heap_);
+  std::vector<std::set<std::pair<Slot, double>>> naive(kParticles);
+  for (std::size_t k = 0; k < kParticles; ++k) {
+    for (Slot s = 0; s < 40 * (k + 1); ++s) {
+      const double x = static_cast<double>(k * 1000 + s);
+      store.index(k).insert(s, x, -x);
+      naive[k].insert({s, x});
+    }
+  }
+  std::vector<SpatialIndex> old;
+  for (std::size_t k = 0; k < kParticles; ++k) old.push_back(store.index(k));
+  const std::vector<std::uint32_t> index = {4, 4, 1, 0};
+  store.gather(index);
+  old.clear();  // only the survivors' indices hold nodes now
+  for (std::size_t k = 0; k < index.size(); ++k) {
+    std::set<std::pair<Slot, double>> entries;
+    store.index(k).for_each([&](const SpatialEntry& e) {
+      EXPECT_EQ(e.y, -e.x);
+      entries.insert({e.slot, e.x});
+    });
+    EXPECT_EQ(entries, naive[index[k]]) << "particle " << k;
+  }
+  EXPECT_TRUE(store.index(0).shares_root_with(store.index(1)));
+  store.index(0).erase(0, 4000.0, -4000.0);  // copies diverge on their own
+  EXPECT_EQ(store.index(0).size() + 1, store.index(1).size());
+  store.gather({});
+  EXPECT_EQ(this->heap_.stats().live_nodes, 0);
+}
+
 TYPED_TEST(ParticleStoreTest, GatherResizesTheStore) {
   ParticleStore store(4, this->heap_);
   std::vector<NaiveParticle> naive(4);

@@ -1,0 +1,86 @@
+#include "engine/association.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace fastslam::engine {
+namespace {
+
+bool contains(const std::vector<memory::Slot>& slots, memory::Slot slot) {
+  return std::find(slots.begin(), slots.end(), slot) != slots.end();
+}
+
+}  // namespace
+
+double associate_maximum_likelihood(std::span<AssociationCandidate> candidates,
+                                    double log_new_landmark, std::span<std::int64_t> assignment) {
+  std::fill(assignment.begin(), assignment.end(), kNewLandmark);
+  std::sort(candidates.begin(), candidates.end(),
+            [](const AssociationCandidate& a, const AssociationCandidate& b) {
+              if (a.log_likelihood != b.log_likelihood) return a.log_likelihood > b.log_likelihood;
+              if (a.observation != b.observation) return a.observation < b.observation;
+              return a.slot < b.slot;
+            });
+  double log_weight = 0.0;
+  std::size_t assigned = 0;
+  for (std::size_t c = 0; c < candidates.size() && assigned < assignment.size(); ++c) {
+    const AssociationCandidate& cand = candidates[c];
+    if (cand.log_likelihood < log_new_landmark) break;  // sorted: every later one is below too
+    if (assignment[cand.observation] != kNewLandmark) continue;
+    // Taken slots are the assigned ones; scans are small, so a linear look is cheapest.
+    bool taken = false;
+    for (std::int64_t a : assignment) taken = taken || a == static_cast<std::int64_t>(cand.slot);
+    if (taken) continue;
+    assignment[cand.observation] = cand.slot;
+    log_weight += cand.log_likelihood;
+    ++assigned;
+  }
+  log_weight += static_cast<double>(assignment.size() - assigned) * log_new_landmark;
+  return log_weight;
+}
+
+double associate_sampling(std::span<AssociationCandidate> candidates, double log_new_landmark,
+                          parallel::RandomStream& stream, std::span<std::int64_t> assignment,
+                          std::vector<memory::Slot>& taken) {
+  // Candidates grouped by observation, in slot order: the draw does not depend on the order the
+  // spatial query visited them in.
+  std::sort(candidates.begin(), candidates.end(),
+            [](const AssociationCandidate& a, const AssociationCandidate& b) {
+              if (a.observation != b.observation) return a.observation < b.observation;
+              return a.slot < b.slot;
+            });
+  taken.clear();
+  double log_weight = 0.0;
+  std::size_t c = 0;
+  for (std::size_t j = 0; j < assignment.size(); ++j) {
+    const std::size_t first = c;
+    while (c < candidates.size() && candidates[c].observation == j) ++c;
+    // ln of the normaliser p0 + sum p_jn over free candidates, by log-sum-exp.
+    double top = log_new_landmark;
+    for (std::size_t k = first; k < c; ++k) {
+      if (!contains(taken, candidates[k].slot)) top = std::max(top, candidates[k].log_likelihood);
+    }
+    double total = std::exp(log_new_landmark - top);
+    for (std::size_t k = first; k < c; ++k) {
+      if (!contains(taken, candidates[k].slot)) total += std::exp(candidates[k].log_likelihood - top);
+    }
+    log_weight += top + std::log(total);
+    // Walk the cumulative sum to the uniform's point; "new" is the last bucket, so rounding at
+    // the end of the sum falls to it.
+    double point = stream.uniform() * total;
+    std::int64_t choice = kNewLandmark;
+    for (std::size_t k = first; k < c; ++k) {
+      if (contains(taken, candidates[k].slot)) continue;
+      point -= std::exp(candidates[k].log_likelihood - top);
+      if (point < 0) {
+        choice = candidates[k].slot;
+        break;
+      }
+    }
+    assignment[j] = choice;
+    if (choice != kNewLandmark) taken.push_back(static_cast<memory::Slot>(choice));
+  }
+  return log_weight;
+}
+
+}  // namespace fastslam::engine
