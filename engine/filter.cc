@@ -19,6 +19,7 @@
 #include <Eigen/Core>
 #include <oneapi/tbb/combinable.h>
 
+#include "engine/association.h"
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
 #include "engine/motion_model.h"
@@ -56,7 +57,23 @@ struct PlannedObservation {
 
 struct PhaseTimes {
   double predict = 0.0;
+  double associate = 0.0;
   double update = 0.0;
+  std::uint64_t created = 0;  // landmarks started, summed over particles
+  std::uint64_t removed = 0;  // landmarks removed by negative information
+};
+
+// Unknown association: ids of new landmarks are (scan step) * 2^20 + (observation index), unique
+// and stable across copies; a scan may hold fewer than 2^20 observations.
+constexpr std::uint64_t kObservationsPerScanLimit = std::uint64_t{1} << 20;
+
+// Per-thread scratch of the unknown-association pass over one block of particles.
+struct AssociationScratch {
+  std::vector<AssociationCandidate> candidates;
+  std::vector<std::int64_t> assignment;  // block particle k, observation j: [k * Z + j]
+  std::vector<memory::Slot> taken;
+  std::vector<memory::Slot> touched;
+  std::vector<memory::SpatialEntry> in_view;
 };
 
 }  // namespace
@@ -175,6 +192,7 @@ struct Filter::Impl {
         }
       }
       const Clock::time_point t1 = Clock::now();
+      Clock::time_point t_associated = t1;
       if (scan != nullptr) {
         // FastSLAM 2.0: the N normals of each particle's pose draw, stream (seed, scan step,
         // particle, kProposal), for the whole block in one vectorised batch (the same values
@@ -185,16 +203,36 @@ struct Filter::Impl {
           parallel::normals_for_particles(seed, scan_step, parallel::Purpose::kProposal,
                                           static_cast<std::uint32_t>(begin), count, N, draws);
         }
-        for (std::size_t i = begin; i < end; ++i) {
-          update_particle<Motion>(i, load(i), *scan, scan_step,
-                                  fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr,
-                                  log_weight, save, cov_of);
+        if (config.association == Association::kKnown) {
+          for (std::size_t i = begin; i < end; ++i) {
+            update_particle<Motion>(
+                i, load(i), *scan, scan_step,
+                fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
+                save, cov_of);
+          }
+        } else {
+          // Unknown association, in two sweeps over the block so each phase is timed: choose
+          // (and, for 2.0, draw the pose), then change the maps.
+          thread_local AssociationScratch scratch;
+          scratch.assignment.resize(count * scan->size());
+          for (std::size_t i = begin; i < end; ++i) {
+            associate_particle<Motion>(
+                i, load(i), *scan, scan_step,
+                fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
+                save, cov_of, scratch, &scratch.assignment[(i - begin) * scan->size()]);
+          }
+          t_associated = Clock::now();
+          for (std::size_t i = begin; i < end; ++i) {
+            update_particle_unknown(i, *scan, scan_step, scratch,
+                                    &scratch.assignment[(i - begin) * scan->size()]);
+          }
         }
       }
       const Clock::time_point t2 = Clock::now();
       PhaseTimes& times = phase_times.local();
       times.predict += seconds_between(t0, t1);
-      times.update += seconds_between(t1, t2);
+      times.associate += seconds_between(t1, t_associated);
+      times.update += seconds_between(t_associated, t2);
     });
     if (record) reduce_recorded(m);
   }
@@ -282,6 +320,168 @@ struct Filter::Impl {
     log_weight[i] += log_w;
   }
 
+  // Unknown association, first sweep: the candidates of every observation from the spatial
+  // index, gated; the scan's joint choice (ML or DAS, mutual exclusion); the log-weight; for
+  // FastSLAM 2.0 the proposal folded over the chosen landmarks and the pose drawn from it.
+  // Writes the choice of observation j to assignment[j] (a slot, or kNewLandmark).
+  template <class Motion, class Save, class CovOf>
+  void associate_particle(std::size_t i, typename Motion::State s,
+                          const std::vector<PlannedObservation>& scan, std::uint64_t scan_step,
+                          const double* draw, double* log_weight, const Save& save,
+                          const CovOf& cov_of, AssociationScratch& scratch,
+                          std::int64_t* assignment) {
+    constexpr int N = Motion::kStateDim;
+    const bool fs2 = draw != nullptr;
+    const memory::LandmarkTree& map = store.map(i);
+    const memory::SpatialIndex& index = store.index(i);
+    PoseGaussian<N> prior;
+    prior.mean = s;
+    if (fs2) prior.cov = cov_of(i);
+    const Pose pose = s.template head<3>();  // 1.0: the sampled pose; 2.0: the predicted mean
+    // The gate as a Euclidean radius around the landmark position an observation implies:
+    // Mahalanobis^2 >= |d|^2 / lambda_max(Sigma + R_xy + pose term) under linearisation, and a
+    // landmark's covariance never exceeds its initial one (EKF updates only shrink it), whose
+    // largest eigenvalue is bounded by landmark_variance_bound.
+    const double offset = std::hypot(sensor.offset().x, sensor.offset().y);
+    const double gate = config.gating.gate;
+    const double scale2 = config.gating.search_scale * config.gating.search_scale;
+    scratch.candidates.clear();
+    for (std::size_t j = 0; j < scan.size(); ++j) {
+      const Eigen::Vector2d& z = scan[j].z;
+      const Eigen::Vector2d at = sensor.landmark_from(z, pose);
+      double spread = landmark_variance_bound + measurement_variance(z[0]);
+      if (fs2) {
+        const double lever = z[0] + offset;
+        spread += 2.0 * (prior.cov(0, 0) + prior.cov(1, 1)) + 2.0 * lever * lever * prior.cov(2, 2);
+      }
+      const double radius = std::sqrt(scale2 * gate * spread);
+      const Eigen::Vector2d from = sensor.sensor_position(pose);
+      index.within(at[0], at[1], radius, [&](const memory::SpatialEntry& e) {
+        if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
+        const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
+        double m2, ll;
+        if (fs2) {
+          const ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, r);
+          m2 = t.mahalanobis2;
+          ll = t.log_likelihood;
+        } else {
+          const LandmarkObservation t = evaluate_observation(sensor, lm, pose, z, r);
+          m2 = t.mahalanobis2;
+          ll = t.log_likelihood;
+        }
+        if (m2 <= gate) {
+          scratch.candidates.push_back({static_cast<std::uint32_t>(j), e.slot, ll});
+        }
+      });
+    }
+    const std::span<std::int64_t> chosen(assignment, scan.size());
+    double log_w;
+    if (config.association == Association::kMaximumLikelihood) {
+      log_w = associate_maximum_likelihood(scratch.candidates, config.log_new_landmark, chosen);
+    } else {
+      parallel::RandomStream stream(
+          {config.seed, scan_step, static_cast<std::uint32_t>(i), parallel::Purpose::kAssociation});
+      log_w = associate_sampling(scratch.candidates, config.log_new_landmark, stream, chosen,
+                                 scratch.taken);
+    }
+    if (fs2) {
+      // Fold the chosen landmarks into the proposal in scan order, then draw the pose once; with
+      // none chosen the draw is from the motion prior (as eq. 68 for new landmarks). Under ML
+      // the weight is the chain of the folds' terms (as with known ids) times p0 per new
+      // landmark; under DAS it stays the product of the normalisers.
+      PoseGaussian<N> proposal = prior;
+      double folded = 0.0;
+      for (std::size_t j = 0; j < scan.size(); ++j) {
+        if (chosen[j] == kNewLandmark) {
+          folded += config.log_new_landmark;
+          continue;
+        }
+        const LandmarkGaussian lm = to_gaussian(map.at(static_cast<memory::Slot>(chosen[j])));
+        const ProposalObservation<N> terms = evaluate_proposal<N>(sensor, lm, proposal, scan[j].z, r);
+        folded += terms.log_likelihood;
+        proposal = fold<N>(proposal, terms);
+      }
+      if (config.association == Association::kMaximumLikelihood) log_w = folded;
+      save(i, sample_pose<N>(proposal, draw));
+      cov_of(i).setZero();
+    }
+    log_weight[i] += log_w;
+  }
+
+  // Unknown association, second sweep: EKF updates of the chosen landmarks at the particle's
+  // (drawn) pose, their index entries moved; negative information for the landmarks in view and
+  // not chosen (eq. 73-75; removal below the bound); then the new landmarks.
+  void update_particle_unknown(std::size_t i, const std::vector<PlannedObservation>& scan,
+                               std::uint64_t scan_step, AssociationScratch& scratch,
+                               const std::int64_t* assignment) {
+    memory::LandmarkTree& map = store.map(i);
+    memory::SpatialIndex& index = store.index(i);
+    const Pose pose(store.x()[i], store.y()[i], store.theta()[i]);
+    const auto step_now = static_cast<std::int64_t>(scan_step);
+    PhaseTimes& counts = phase_times.local();
+    scratch.touched.clear();
+    for (std::size_t j = 0; j < scan.size(); ++j) {
+      if (assignment[j] == kNewLandmark) continue;
+      const auto slot = static_cast<memory::Slot>(assignment[j]);
+      memory::Landmark& stored = map.edit(slot);
+      const double from_x = stored.x, from_y = stored.y;
+      LandmarkGaussian lm = to_gaussian(stored);
+      apply_update(lm, evaluate_observation(sensor, lm, pose, scan[j].z, r), r);
+      store_gaussian(lm, stored);
+      stored.log_odds += config.existence.seen;
+      stored.last_seen = step_now;
+      if (stored.x != from_x || stored.y != from_y) {
+        index.move(slot, from_x, from_y, stored.x, stored.y);
+      }
+      scratch.touched.push_back(slot);
+    }
+    const ExistenceConfig& ex = config.existence;
+    if (ex.negative_information && config.sensor.max_range > ex.range_margin) {
+      const Eigen::Vector2d at = sensor.sensor_position(pose);
+      scratch.in_view.clear();
+      index.in_footprint(at[0], at[1], pose[2] + sensor.offset().yaw,
+                         config.sensor.max_range - ex.range_margin, config.sensor.field_of_view,
+                         [&](const memory::SpatialEntry& e) {
+                           if (std::find(scratch.touched.begin(), scratch.touched.end(), e.slot) ==
+                               scratch.touched.end()) {
+                             scratch.in_view.push_back(e);
+                           }
+                         });
+      // Slot order, so the result does not depend on how the index visits its leaves.
+      std::sort(scratch.in_view.begin(), scratch.in_view.end(),
+                [](const memory::SpatialEntry& a, const memory::SpatialEntry& b) {
+                  return a.slot < b.slot;
+                });
+      for (const memory::SpatialEntry& e : scratch.in_view) {
+        const double log_odds = map.at(e.slot).log_odds - ex.missed;
+        if (log_odds < ex.remove_below) {
+          index.erase(e.slot, e.x, e.y);
+          map.erase(e.slot);
+          ++counts.removed;
+        } else {
+          map.edit(e.slot).log_odds = log_odds;
+        }
+      }
+    }
+    for (std::size_t j = 0; j < scan.size(); ++j) {
+      if (assignment[j] != kNewLandmark) continue;
+      memory::Landmark stored;
+      store_gaussian(initialize_landmark(sensor, pose, scan[j].z, r), stored);
+      stored.log_odds = ex.initial;
+      stored.id = scan_step * kObservationsPerScanLimit + j;
+      stored.last_seen = step_now;
+      const memory::Slot slot = map.insert(stored);
+      index.insert(slot, stored.x, stored.y);
+      ++counts.created;
+    }
+  }
+
+  // The largest eigenvalue of the measurement noise mapped to the plane at range `range`: the
+  // landmark covariance of eq. 70 has eigenvalues sigma_r^2 and (range sigma_phi)^2.
+  double measurement_variance(double range) const {
+    return std::max(r(0, 0), range * range * r(1, 1));
+  }
+
   void resample(std::uint64_t scan_step) {
     const Clock::time_point t0 = Clock::now();
     try {
@@ -314,6 +514,9 @@ struct Filter::Impl {
   std::vector<double> weights;
   std::vector<TrajectoryPoint> trajectory;
   std::unordered_map<std::int64_t, memory::Slot> known_slots;
+  // Unknown association: a bound on every landmark covariance's largest eigenvalue (the
+  // largest of eq. 70 over the observations seen so far), for the candidate search radius.
+  double landmark_variance_bound = 0.0;
   std::uint64_t step = 0;  // events so far (controls and scans): keys the random streams
   std::uint64_t controls = 0, scans = 0, observations = 0, resamples = 0, weight_resets = 0;
   double resample_seconds = 0.0;
@@ -361,6 +564,12 @@ void Filter::observe(std::span<const Observation> scan) {
       throw std::invalid_argument(where() + "bearing must be finite (got " +
                                   std::to_string(o.bearing) + ")");
     }
+    PlannedObservation p;
+    p.z = {o.range, wrap_angle(o.bearing)};
+    if (s.config.association != Association::kKnown) {
+      plan.push_back(p);
+      continue;
+    }
     if (o.id < 0) {
       throw std::invalid_argument(where() + "known association needs a landmark id >= 0 (got " +
                                   std::to_string(o.id) + ")");
@@ -369,8 +578,6 @@ void Filter::observe(std::span<const Observation> scan) {
       throw std::invalid_argument(where() + "landmark id " + std::to_string(o.id) +
                                   " appears twice in one scan");
     }
-    PlannedObservation p;
-    p.z = {o.range, wrap_angle(o.bearing)};
     p.id = static_cast<std::uint64_t>(o.id);
     if (auto found = s.known_slots.find(o.id); found != s.known_slots.end()) {
       p.slot = found->second;
@@ -380,6 +587,16 @@ void Filter::observe(std::span<const Observation> scan) {
       new_slots.emplace(o.id, p.slot);
     }
     plan.push_back(p);
+  }
+  if (s.config.association != Association::kKnown) {
+    if (scan.size() >= kObservationsPerScanLimit) {
+      throw std::invalid_argument("Filter::observe: a scan holds at most " +
+                                  std::to_string(kObservationsPerScanLimit - 1) +
+                                  " observations (got " + std::to_string(scan.size()) + ")");
+    }
+    for (const PlannedObservation& p : plan) {
+      s.landmark_variance_bound = std::max(s.landmark_variance_bound, s.measurement_variance(p.z[0]));
+    }
   }
   const Clock::time_point t0 = Clock::now();
   const std::uint64_t scan_step = s.step;
@@ -457,7 +674,10 @@ FilterStatistics Filter::statistics() const {
   st.weight_resets = s.weight_resets;
   s.phase_times.combine_each([&](const PhaseTimes& t) {
     st.predict_seconds += t.predict;
+    st.associate_seconds += t.associate;
     st.update_seconds += t.update;
+    st.landmarks_created += t.created;
+    st.landmarks_removed += t.removed;
   });
   st.resample_seconds = s.resample_seconds;
   st.observe_wall_seconds = s.observe_wall_seconds;
@@ -481,9 +701,11 @@ const memory::ParticleStore& Filter::particles() {
 
 // ---- save / load ----------------------------------------------------------------------------
 // Format (native byte order, for the same build): magic, version, sizeof(FilterConfig), the
-// config bytes (padding zeroed), counters, queued controls, known-id table, FastSLAM 2.0
-// covariances, particle columns, then per particle either "same map as particle i-1" or its
-// landmarks (slot, value). Equal states save equal bytes.
+// config bytes (padding zeroed), counters, the landmark variance bound, queued controls,
+// known-id table, FastSLAM 2.0 covariances, particle columns, then per particle either "same map
+// as particle i-1" or its landmarks (slot, value). Spatial indices are not written: they are
+// rebuilt from the maps (an index's entries are its map's slots and means, and queries are
+// exact, so the rebuilt index answers the same). Equal states save equal bytes.
 //
 // Loading trusts nothing: every length is checked against what the configuration implies, and
 // vectors are read in bounded chunks, so a corrupt length or particle count fails with
@@ -494,6 +716,7 @@ const memory::ParticleStore& Filter::particles() {
 namespace {
 
 constexpr char kMagic[8] = {'F', 'S', 'L', 'A', 'M', 'S', 'T', '1'};
+constexpr std::uint32_t kVersion = 2;  // 2: unknown association (variance bound, free slots)
 
 [[noreturn]] void corrupt(const std::string& what) {
   throw std::runtime_error("Filter::load: corrupt state (" + what + ")");
@@ -558,7 +781,7 @@ void Filter::save(std::ostream& out) const {
   const Impl& s = *impl_;
   static_assert(std::is_trivially_copyable_v<FilterConfig>);
   out.write(kMagic, sizeof(kMagic));
-  put<std::uint32_t>(out, 1);
+  put<std::uint32_t>(out, kVersion);
   put<std::uint64_t>(out, sizeof(FilterConfig));
   FilterConfig config = s.config;
 #if defined(__has_builtin)
@@ -571,6 +794,7 @@ void Filter::save(std::ostream& out) const {
                           s.weight_resets}) {
     put(out, v);
   }
+  put(out, s.landmark_variance_bound);
   put_vector(out, s.pending);
   put_vector(out, s.trajectory);
   std::vector<KnownSlot> known;
@@ -605,7 +829,9 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   if (!in || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0) {
     throw std::runtime_error("Filter::load: not a fastslam filter state (bad magic)");
   }
-  if (get<std::uint32_t>(in) != 1) throw std::runtime_error("Filter::load: unknown version");
+  if (get<std::uint32_t>(in) != kVersion) {
+    throw std::runtime_error("Filter::load: unknown version");
+  }
   if (get<std::uint64_t>(in) != sizeof(FilterConfig)) {
     throw std::runtime_error("Filter::load: state written by an incompatible build");
   }
@@ -613,7 +839,11 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   // values must pass validate (enums in range, particles >= 1, ...).
   alignas(FilterConfig) unsigned char config_bytes[sizeof(FilterConfig)];
   read_bytes(in, config_bytes, sizeof(config_bytes));
-  if (config_bytes[offsetof(FilterConfig, record_trajectory)] > 1) corrupt("config flag");
+  if (config_bytes[offsetof(FilterConfig, record_trajectory)] > 1 ||
+      config_bytes[offsetof(FilterConfig, existence) +
+                   offsetof(ExistenceConfig, negative_information)] > 1) {
+    corrupt("config flag");
+  }
   FilterConfig config;
   std::memcpy(&config, config_bytes, sizeof(config));
   try {
@@ -624,6 +854,8 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   std::uint64_t counters[6];
   for (std::uint64_t& v : counters) v = get<std::uint64_t>(in);
   const std::uint64_t step = counters[0];
+  const auto variance_bound = get<double>(in);
+  if (!std::isfinite(variance_bound) || variance_bound < 0) corrupt("variance bound");
   constexpr std::uint64_t kLimit = std::uint64_t{1} << 34;
   std::vector<PendingControl> pending = get_vector<PendingControl>(in, kLimit);
   for (const PendingControl& c : pending) {
@@ -663,6 +895,7 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   s.trajectory = std::move(trajectory);
   for (const KnownSlot& k : known) s.known_slots.emplace(k.id, k.slot);
   s.pose_cov = std::move(pose_cov);
+  s.landmark_variance_bound = variance_bound;
   memory::ParticleStore& store = s.store;
   for (std::span<double> column : {store.x(), store.y(), store.theta(), store.v(), store.omega(),
                                    store.log_weight()}) {
@@ -681,23 +914,37 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
     if (flag > 1 || (flag == 1 && i == 0)) corrupt("map sharing");
     if (flag == 1) {
       store.map(i) = store.map(i - 1);
+      store.index(i) = store.index(i - 1);
       continue;
     }
     // Rebuild with the same slots: inserting in slot order takes the lowest free slot, so
     // placeholders fill the holes and are erased afterwards. Known association: every map
-    // holds exactly the K known slots.
+    // holds exactly the K known slots. Unknown: any count, and holes (removed landmarks) of at
+    // most kMaxHoles in all, so a corrupt slot cannot make the load allocate without bound.
     memory::LandmarkTree& map = store.map(i);
+    const bool known_ids = config.association == Association::kKnown;
     const auto count = get<std::uint64_t>(in);
-    if (count != known.size()) corrupt("map size");
+    if (known_ids ? count != known.size() : count > kLimit) corrupt("map size");
+    constexpr std::uint64_t kMaxHoles = std::uint64_t{1} << 24;
     std::vector<memory::Slot> holes;
     for (std::uint64_t k = 0; k < count; ++k) {
       const auto slot = get<memory::Slot>(in);
       const auto lm = get<memory::Landmark>(in);
-      if (slot >= known.size() || slot < map.size()) corrupt("slots out of order");
+      if ((known_ids && slot >= known.size()) || slot < map.size() ||
+          slot - map.size() > kMaxHoles - holes.size()) {
+        corrupt("slots out of order");
+      }
+      if (!std::isfinite(lm.x) || !std::isfinite(lm.y) || std::abs(lm.x) > 1e150 ||
+          std::abs(lm.y) > 1e150) {
+        corrupt("landmark position");
+      }
       while (map.size() < slot) holes.push_back(map.insert({}));
       map.insert(lm);
     }
     for (memory::Slot hole : holes) map.erase(hole);
+    if (!known_ids) {
+      for (const auto [slot, lm] : map) store.index(i).insert(slot, lm.x, lm.y);
+    }
   }
   return std::unique_ptr<Filter>(new Filter(std::move(impl)));
 }

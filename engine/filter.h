@@ -15,6 +15,19 @@
 // streams of parallel/random_stream.h (seed, step, particle, purpose), so results are
 // bit-identical for any thread count and grain, and do not depend on when the queue is drained.
 //
+// Data association. With known ids (`Association::kKnown`) every particle holds the same
+// landmarks in the same slots. Unknown association (ML, eq. 64, or DAS, eq. 65) is per particle:
+// each particle keeps a spatial index over its map (memory/spatial_index.h, persistent like the
+// map), finds each observation's candidates by a disc query around the landmark position the
+// observation implies (radius from the Mahalanobis gate, so never a scan of the map), gates
+// them, and chooses for the whole scan at once with mutual exclusion (engine/association.h);
+// "new" has likelihood p0 (config.log_new_landmark). FastSLAM 2.0 scores candidates with the
+// pose integrated out (eq. 60-61), folds the chosen ones into its proposal and draws the pose
+// once. Then, per particle: the chosen landmarks are updated and moved in the index; every
+// landmark inside the sensor's footprint (spatial query) and not chosen loses existence
+// log-odds and is removed below the bound (eq. 73-75, config.existence); new landmarks get ids
+// (scan step) * 2^20 + (observation index).
+//
 // Bad input (NaN or infinite values, a negative or zero range, dt < 0, a missing or repeated id
 // in known-association mode) throws std::invalid_argument naming what is wrong and leaves the
 // filter exactly as it was.
@@ -22,9 +35,10 @@
 // Ownership: the filter owns its particles, maps, node heap and threads (a TBB arena of
 // `config.threads`). `observe` borrows the scan for the call only.
 // Thread safety: thread-compatible: one call at a time; the filter runs its own parallel work.
-// Costs (M particles, K queued controls, Z observations in the scan, N landmarks per map):
-// `predict` O(1) amortised; `observe` O(M (K + Z log N)) work spread over the threads, plus
-// resampling O(M); `estimate` O(M + N) (it copies the best map out); `save` O(M N) worst case
+// Costs (M particles, K queued controls, Z observations in the scan, N landmarks per map, k
+// candidates and landmarks in view per particle): `predict` O(1) amortised; `observe`
+// O(M (K + Z log N)) work with known ids, O(M (K + (Z + k) log N + Z k)) unknown, spread over
+// the threads, plus resampling O(M); `estimate` O(M + N) (it copies the best map out); `save` O(M N) worst case
 // (maps that share a root are written once).
 #pragma once
 
@@ -88,9 +102,14 @@ struct FilterStatistics {
   std::uint64_t weight_resets = 0;  // scans whose every weight was zero (reset to uniform)
   // Time in each phase, summed over threads (thread-seconds), and the wall time of observe.
   double predict_seconds = 0.0;
-  double update_seconds = 0.0;
+  double associate_seconds = 0.0;  // unknown association: candidates, choice, 2.0's pose draw
+  double update_seconds = 0.0;     // landmark updates, negative information, new landmarks
   double resample_seconds = 0.0;
   double observe_wall_seconds = 0.0;
+  // Unknown association, summed over particles since construction (or load): landmarks
+  // started by observations, and removed by negative information.
+  std::uint64_t landmarks_created = 0;
+  std::uint64_t landmarks_removed = 0;
   // The node heap: live tree nodes and bytes of all maps together.
   std::int64_t live_nodes = 0;
   std::int64_t live_bytes = 0;

@@ -21,9 +21,10 @@ void validate(const FilterConfig& c) {
   require(c.particles >= 1, "particles must be at least 1 (got 0)");
   require(c.algorithm == Algorithm::kFastSlam1 || c.algorithm == Algorithm::kFastSlam2,
           "unknown algorithm");
-  require(c.association == Association::kKnown,
-          std::string("association '") + std::string(to_string(c.association)) +
-              "' is not implemented yet; use 'known'");
+  require(c.association == Association::kKnown ||
+              c.association == Association::kMaximumLikelihood ||
+              c.association == Association::kDataAssociationSampling,
+          "unknown association");
   const MotionConfig& m = c.motion;
   for (int k = 0; k < 2; ++k) {
     require(std::isfinite(m.sigma_control[k]) && m.sigma_control[k] >= 0,
@@ -57,6 +58,11 @@ void validate(const FilterConfig& c) {
   require(std::isfinite(e.initial) && std::isfinite(e.seen) && std::isfinite(e.missed) &&
               std::isfinite(e.remove_below),
           "existence parameters must be finite");
+  require(std::isfinite(e.range_margin) && e.range_margin >= 0,
+          "existence.range_margin must be finite and >= 0");
+  require(c.gating.gate > 0 && std::isfinite(c.gating.gate), "gating.gate must be finite and > 0");
+  require(std::isfinite(c.gating.search_scale) && c.gating.search_scale >= 1,
+          "gating.search_scale must be finite and >= 1");
   parallel::validate(c.resample);
   require(c.resample.when == parallel::ResamplePolicy::When::kEveryStep ||
               c.resample.when == parallel::ResamplePolicy::When::kEssBelowFraction,

@@ -55,8 +55,27 @@ void add_run_options(CLI::App& cmd, fastslam::tools::RunOptions& o, Words& w) {
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(CLI::Range(1U, 100'000'000U))
       ->capture_default_str();
-  cmd.add_option("--association", w.association, "data association (ids from the simulator)")
-      ->check(CLI::IsMember({"known"}))
+  cmd.add_option("--association", w.association,
+                 "data association: known (ids from the simulator), ml (maximum likelihood, "
+                 "eq. 64) or das (sampling, eq. 65)")
+      ->check(CLI::IsMember({"known", "ml", "das"}))
+      ->capture_default_str();
+  cmd.add_option("--log-p0", f.log_new_landmark,
+                 "ln p0, the log-likelihood of a new landmark (ml, das)")
+      ->capture_default_str();
+  cmd.add_option("--gate", f.gating.gate,
+                 "squared Mahalanobis gate for association candidates (ml, das)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("!--no-negative-information", f.existence.negative_information,
+               "never remove landmarks that were in view and not seen (ml, das)");
+  cmd.add_option("--clutter", o.sim.clutter_rate,
+                 "simulated false alarms per scan (Poisson mean; ml, das)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  cmd.add_option("--match-radius", o.match_radius,
+                 "metres within which estimated and true landmarks are paired (ml, das)")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
       ->capture_default_str();
@@ -117,7 +136,9 @@ int main(int argc, char** argv) {
       run.sim.loops = words.loops > 0 ? words.loops : (csv ? 2 : 1);
       run.filter.algorithm =
           words.algorithm == "fastslam2" ? Algorithm::kFastSlam2 : Algorithm::kFastSlam1;
-      run.filter.association = Association::kKnown;
+      run.filter.association = words.association == "ml"    ? Association::kMaximumLikelihood
+                               : words.association == "das" ? Association::kDataAssociationSampling
+                                                            : Association::kKnown;
       run.filter.resample.when = words.resample == "every"
                                      ? ResamplePolicy::When::kEveryStep
                                      : ResamplePolicy::When::kEssBelowFraction;

@@ -8,7 +8,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <algorithm>
 #include <memory>
+#include <span>
 #include <stdexcept>
 #include <vector>
 
@@ -16,6 +18,7 @@
 #include <oneapi/tbb/info.h>
 
 #include "engine/filter.h"
+#include "tools/map_evaluation.h"
 
 namespace fastslam::tools {
 namespace {
@@ -106,6 +109,8 @@ int run_simulation(const RunOptions& options) {
   Progress progress(options.progress);
   std::vector<TruePose> truth;
   std::vector<double> times;
+  std::unique_ptr<bool[]> observed_flags(new bool[world.landmarks.size()]());
+  const std::span<bool> observed(observed_flags.get(), world.landmarks.size());
   std::vector<engine::Observation> scan;
   SimStep step;
   double sim_seconds = 0.0;
@@ -123,6 +128,13 @@ int run_simulation(const RunOptions& options) {
     if (step.has_scan) {
       scan.clear();
       for (const SimObservation& z : step.scan) {
+        if (z.landmark == kClutter) {
+          // Known ids are for true detections; unknown association must sort clutter out.
+          if (config.association == engine::Association::kKnown) continue;
+          scan.push_back({z.range, z.bearing, -1});
+          continue;
+        }
+        observed[z.landmark] = true;
         scan.push_back({z.range, z.bearing, static_cast<std::int64_t>(z.landmark)});
       }
       filter.observe(scan);
@@ -148,13 +160,21 @@ int run_simulation(const RunOptions& options) {
     pose_se += (p.x - s.x) * (p.x - s.x) + (p.y - s.y) * (p.y - s.y);
   }
   const double pose_rmse = trajectory.empty() ? 0.0 : std::sqrt(pose_se / trajectory.size());
-  double landmark_se = 0.0;
-  for (const engine::MapLandmark& l : estimate.map) {
-    const Point& p = world.landmarks.at(l.id);
-    landmark_se += (l.x - p.x) * (l.x - p.x) + (l.y - p.y) * (l.y - p.y);
+  // Known ids: each landmark against its own true landmark. Unknown: paired by distance.
+  const TruthIndex truth_index(world.landmarks);
+  const MapScore score =
+      score_map(estimate.map, world.landmarks, truth_index, observed, options.match_radius);
+  double landmark_rmse = score.rmse_m;
+  if (config.association == engine::Association::kKnown) {
+    double landmark_se = 0.0;
+    for (const engine::MapLandmark& l : estimate.map) {
+      const Point& p = world.landmarks.at(l.id);
+      landmark_se += (l.x - p.x) * (l.x - p.x) + (l.y - p.y) * (l.y - p.y);
+    }
+    landmark_rmse = estimate.map.empty() ? 0.0 : std::sqrt(landmark_se / estimate.map.size());
   }
-  const double landmark_rmse =
-      estimate.map.empty() ? 0.0 : std::sqrt(landmark_se / estimate.map.size());
+  const auto observed_count =
+      static_cast<std::size_t>(std::count(observed.begin(), observed.end(), true));
   const engine::FilterStatistics stats = filter.statistics();
   const TruePose& last = truth.back();
 
@@ -171,10 +191,17 @@ int run_simulation(const RunOptions& options) {
       {"observations", stats.observations},
       {"true_landmarks", world.landmarks.size()},
       {"landmarks", estimate.map.size()},
+      {"observed_landmarks", observed_count},
+      {"clutter_rate", options.sim.clutter_rate},
+      {"match_radius_m", options.match_radius},
+      {"matched_landmarks", score.matched},
+      {"spurious_landmarks", score.spurious},
+      {"missing_landmarks", score.missing},
       {"wall_seconds", filter_seconds},
       {"simulator_seconds", sim_seconds},
       {"seconds_per_phase",
        {{"predict", stats.predict_seconds},
+        {"associate", stats.associate_seconds},
         {"update", stats.update_seconds},
         {"resample", stats.resample_seconds}}},
       {"resamples", stats.resamples},
@@ -194,6 +221,9 @@ int run_simulation(const RunOptions& options) {
               static_cast<unsigned long long>(stats.scans), estimate.map.size());
   std::printf("  pose RMSE %.3f m, landmark RMSE %.3f m, filter %.3f s (simulator %.3f s)\n",
               pose_rmse, landmark_rmse, filter_seconds, sim_seconds);
+  std::printf("  map: %zu matched within %.1f m, %zu spurious, %zu of %zu observed missing\n",
+              score.matched, options.match_radius, score.spurious, score.missing,
+              observed_count);
   if (options.out.empty()) return 0;
 
   std::filesystem::create_directories(options.out);

@@ -26,6 +26,9 @@ struct RunOptions {
   double loop_length = 2000.0;         // loop
   SimConfig sim;
   engine::FilterConfig filter;
+  // Unknown association: estimated landmarks are paired with true ones within this distance
+  // (tools/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
+  double match_radius = 5.0;
   std::string out;            // output directory; empty: metrics to stdout only
   bool progress = true;       // a progress bar on stderr when it is a terminal
 };

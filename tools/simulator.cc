@@ -17,6 +17,7 @@ double wrap(double angle) {
 // Streams of one control step: control noise and observation noise never share draws.
 constexpr std::uint32_t kControlStream = 0;
 constexpr std::uint32_t kSensorStream = 1;
+constexpr std::uint32_t kClutterStream = 2;
 
 }  // namespace
 
@@ -40,6 +41,9 @@ Simulator::Simulator(const World& world, const SimConfig& config, std::uint64_t 
     throw std::invalid_argument("simulator: noise standard deviations must not be negative");
   }
   if (config.loops < 1) throw std::invalid_argument("simulator: loops must be at least 1");
+  if (!(config.clutter_rate >= 0) || !(config.clutter_rate <= 1000)) {
+    throw std::invalid_argument("simulator: clutter_rate must be in [0, 1000] per scan");
+  }
 }
 
 bool Simulator::next(SimStep& step) {
@@ -119,6 +123,28 @@ void Simulator::observe(SimStep& step) {
                        range + (config_.sensor_noise ? nr * config_.sigma_range : 0.0));
     z.bearing = wrap(bearing + (config_.sensor_noise ? nb * config_.sigma_bearing : 0.0));
     step.scan.push_back(z);
+  }
+  if (config_.clutter_rate > 0) {
+    // Poisson count by inversion, then points uniform in the annular sector's area.
+    parallel::RandomStream clutter({seed_, step_, kClutterStream, parallel::Purpose::kSimulator});
+    const double u = clutter.uniform();
+    int count = 0;
+    double p = std::exp(-config_.clutter_rate);
+    double cumulative = p;
+    while (u > cumulative && count < 10'000) {
+      ++count;
+      p *= config_.clutter_rate / count;
+      cumulative += p;
+    }
+    const double r0 = config_.min_range * config_.min_range;
+    const double r1 = config_.max_range * config_.max_range;
+    for (int k = 0; k < count; ++k) {
+      SimObservation z;
+      z.landmark = kClutter;
+      z.range = std::sqrt(r0 + clutter.uniform() * (r1 - r0));
+      z.bearing = wrap((clutter.uniform() - 0.5) * config_.field_of_view);
+      step.scan.push_back(z);
+    }
   }
 }
 

@@ -6,8 +6,8 @@
 //
 // Ownership: a `Simulator` borrows the `World`, which must outlive it.
 // Thread safety: thread-compatible; distinct simulators are independent.
-// Costs: `next` is O(1) per control step plus O(log N + k) per scan (kd-tree query over the
-// true landmarks); construction builds the kd-tree in O(N log N).
+// Costs: `next` is O(1) per control step plus O(log N + k + clutter) per scan (kd-tree query
+// over the true landmarks); construction builds the kd-tree in O(N log N).
 #pragma once
 
 #include <cstdint>
@@ -38,6 +38,9 @@ struct SimConfig {
   int loops = 2;                                       // NUMBER_LOOPS
   bool control_noise = true;
   bool sensor_noise = true;
+  // False alarms: a Poisson number per scan with this mean, uniform over the footprint's area
+  // (between min_range and max_range, inside the field of view); their landmark is kClutter.
+  double clutter_rate = 0.0;
 };
 
 struct TruePose {
@@ -46,10 +49,13 @@ struct TruePose {
   double theta = 0.0;
 };
 
+// SimObservation::landmark of a false alarm.
+inline constexpr std::uint32_t kClutter = 0xFFFFFFFFu;
+
 struct SimObservation {
   double range = 0.0;
   double bearing = 0.0;       // wrapped to (-pi, pi]
-  std::uint32_t landmark = 0; // index into World::landmarks (the true correspondence)
+  std::uint32_t landmark = 0; // index into World::landmarks (the true correspondence), or kClutter
 };
 
 // One control step: the (noisy) control the filter sees, the truth after it, and the scan taken
