@@ -609,6 +609,52 @@ void Filter::observe(std::span<const Observation> scan) {
   s.observe_wall_seconds += seconds_between(t0, Clock::now());
 }
 
+void Filter::set_map(std::span<const MapLandmark> landmarks) {
+  Impl& s = *impl_;
+  const bool known_ids = s.config.association == Association::kKnown;
+  std::unordered_map<std::int64_t, memory::Slot> known;
+  double variance_bound = s.landmark_variance_bound;
+  for (std::size_t k = 0; k < landmarks.size(); ++k) {
+    const MapLandmark& l = landmarks[k];
+    auto where = [k] { return "Filter::set_map: landmark " + std::to_string(k) + ": "; };
+    if (!std::isfinite(l.x) || !std::isfinite(l.y) || std::abs(l.x) > 1e150 ||
+        std::abs(l.y) > 1e150) {
+      throw std::invalid_argument(where() + "position must be finite and within 1e150");
+    }
+    const double det = l.sxx * l.syy - l.sxy * l.sxy;
+    if (!std::isfinite(l.sxx) || !std::isfinite(l.sxy) || !std::isfinite(l.syy) ||
+        !(l.sxx > 0) || !(det > 0)) {
+      throw std::invalid_argument(where() + "covariance must be symmetric positive definite");
+    }
+    if (!std::isfinite(l.log_odds)) throw std::invalid_argument(where() + "log_odds not finite");
+    if (known_ids) {
+      if (l.id >= (std::uint64_t{1} << 63) ||
+          !known.emplace(static_cast<std::int64_t>(l.id), static_cast<memory::Slot>(k)).second) {
+        throw std::invalid_argument(where() + "id " + std::to_string(l.id) +
+                                    " is repeated or too large");
+      }
+    }
+    // The largest eigenvalue of the covariance bounds the candidate search (see observe).
+    const double half_trace = 0.5 * (l.sxx + l.syy);
+    variance_bound = std::max(variance_bound, half_trace + std::sqrt(std::max(
+                                                               0.0, half_trace * half_trace - det)));
+  }
+  if (!s.pending.empty()) s.run_pass(nullptr, 0);
+  memory::LandmarkTree map(s.heap);
+  memory::SpatialIndex index(s.heap);
+  for (const MapLandmark& l : landmarks) {
+    memory::Landmark stored{l.x, l.y, l.sxx, l.sxy, l.syy, l.log_odds, l.id, 0};
+    const memory::Slot slot = map.insert(stored);
+    if (!known_ids) index.insert(slot, l.x, l.y);
+  }
+  for (std::size_t i = 0; i < s.store.size(); ++i) {
+    s.store.map(i) = map;
+    s.store.index(i) = index;
+  }
+  if (known_ids) s.known_slots = std::move(known);
+  s.landmark_variance_bound = variance_bound;
+}
+
 Estimate Filter::estimate() {
   Impl& s = *impl_;
   if (!s.pending.empty()) s.run_pass(nullptr, 0);

@@ -133,6 +133,16 @@ class Filter {
   // Throws std::invalid_argument (and changes nothing) for a bad observation.
   void observe(std::span<const Observation> scan);
 
+  // Replaces every particle's map by `landmarks` (one map, shared by all particles): a prior
+  // map, a relocalisation, or a pre-grown map for benchmarks. Slots are assigned in order;
+  // `slot` and `last_seen` of the input are ignored. With known ids each landmark's `id` is its
+  // identity (distinct, < 2^63); otherwise ids are kept as given. Drains the queue first.
+  // Throws std::invalid_argument (and changes nothing) for a non-finite or too large position
+  // (|x|, |y| > 1e150), a covariance that is not symmetric positive definite, non-finite
+  // log-odds, or a repeated id with known ids.
+  // Costs: O(N log N) to build, O(M) to share; the old maps are released.
+  void set_map(std::span<const MapLandmark> landmarks);
+
   // Drains the queue (as observe would, without a scan) and summarises the particles.
   Estimate estimate();
 

@@ -1538,5 +1538,48 @@ TEST(FilterAccuracyTest, BaileyWebmapMaximumLikelihoodWithinOneAndAHalfOfKnown) 
   }
 }
 
+// set_map: every particle gets the given map (one shared root); with known ids the ids address
+// it; unknown association finds its landmarks through the index; bad maps change nothing.
+TEST(FilterSetMapTest, SharedPriorMapIsUsedAndBadMapsAreRefused) {
+  for (const Association association :
+       {Association::kKnown, Association::kMaximumLikelihood, Association::kDataAssociationSampling}) {
+    SCOPED_TRACE(std::string(to_string(association)));
+    FilterConfig c = base_config(Algorithm::kFastSlam1, 8);
+    c.association = association;
+    c.motion.sigma_control[0] = c.motion.sigma_control[1] = 1e-9;
+    Filter filter(c);
+    const std::vector<MapLandmark> prior = {
+        {0, 7, 10.0, 0.0, 0.04, 0.0, 0.04, 5.0, 0},
+        {0, 3, 0.0, 10.0, 0.04, 0.01, 0.04, 5.0, 0},
+        {0, 9, -5.0, -5.0, 0.04, 0.0, 0.09, 5.0, 0},
+    };
+    filter.set_map(prior);
+    const memory::ParticleStore& store = filter.particles();
+    for (std::size_t i = 1; i < store.size(); ++i) {
+      EXPECT_TRUE(store.map(i).shares_root_with(store.map(0)));
+    }
+    EXPECT_EQ(filter.estimate().map.size(), 3u);
+    const Snapshot before = snapshot(filter);
+    std::vector<MapLandmark> bad = prior;
+    bad[2].syy = -1;
+    expect_throw_with<std::invalid_argument>([&] { filter.set_map(bad); }, "landmark 2");
+    bad = prior;
+    bad[1].x = kNaN;
+    expect_throw_with<std::invalid_argument>([&] { filter.set_map(bad); }, "landmark 1");
+    if (association == Association::kKnown) {
+      bad = prior;
+      bad[2].id = 7;
+      expect_throw_with<std::invalid_argument>([&] { filter.set_map(bad); }, "repeated");
+    }
+    EXPECT_TRUE(identical(snapshot(filter), before));
+    // The vehicle at the origin facing +x sees the first landmark 10 m ahead.
+    filter.observe(std::vector<Observation>{{10.0, 0.0, 7}});
+    const Estimate e = filter.estimate();
+    ASSERT_EQ(e.map.size(), 3u) << "the observation was not associated with the prior landmark";
+    EXPECT_LT(e.map[0].sxx, 0.04);  // updated
+    EXPECT_EQ(e.map[1].sxx, 0.04);  // untouched
+  }
+}
+
 }  // namespace
 }  // namespace fastslam::engine

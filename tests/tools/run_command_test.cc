@@ -61,6 +61,36 @@ TEST(RunCommand, WebmapWritesTheContractedOutputs) {
   std::filesystem::remove_all(o.out);
 }
 
+// Unknown association on a loop world with clutter: the map scores are in metrics.json, and
+// negative information keeps the spurious landmarks few.
+TEST(RunCommand, MaximumLikelihoodWithClutterReportsTheMapScores) {
+  RunOptions o;
+  o.progress = false;
+  o.world = "loop";
+  o.loop_length = 300.0;
+  o.sim.loops = 1;
+  o.sim.clutter_rate = 1.0;
+  o.filter.particles = 30;
+  o.filter.association = engine::Association::kMaximumLikelihood;
+  o.match_radius = 2.0;
+  o.out = temp_dir("run_ml");
+  ASSERT_EQ(run_simulation(o), 0);
+  std::ifstream in(o.out + "/metrics.json");
+  const nlohmann::json m = nlohmann::json::parse(in);
+  EXPECT_EQ(m["association"], "ml");
+  for (const char* key : {"matched_landmarks", "spurious_landmarks", "missing_landmarks",
+                          "observed_landmarks", "clutter_rate", "match_radius_m"}) {
+    EXPECT_TRUE(m.contains(key)) << key;
+  }
+  const auto observed = m["observed_landmarks"].get<std::size_t>();
+  EXPECT_GT(observed, 20u);
+  EXPECT_LE(m["spurious_landmarks"].get<std::size_t>() * 5, observed);
+  EXPECT_LE(m["missing_landmarks"].get<std::size_t>() * 10, observed);
+  EXPECT_LT(m["landmark_rmse_m"].get<double>(), 1.0);
+  EXPECT_GT(m["seconds_per_phase"]["associate"].get<double>(), 0.0);
+  std::filesystem::remove_all(o.out);
+}
+
 TEST(RunCommand, RefusesBadOptionsClearly) {
   RunOptions o;
   o.progress = false;
