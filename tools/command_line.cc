@@ -33,7 +33,8 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--loop-length", o.loop_length, "length of a loop world, metres")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd.add_option("--loops", w.loops, "times the route is driven (default: 2 for CSV worlds, 1 else)")
+  cmd.add_option("--loops", w.loops,
+                 "times the route is driven (default: 2 for CSV worlds, 1 else)")
       ->check(CLI::Range(1, 1000));
 }
 
@@ -82,7 +83,8 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--sigma-range", w.sigma_range,
                  "filter range noise, m (default: the source's; the simulator keeps its own)")
       ->check(CLI::PositiveNumber);
-  cmd.add_option("--sigma-bearing", w.sigma_bearing, "filter bearing noise, rad (default: the source's)")
+  cmd.add_option("--sigma-bearing", w.sigma_bearing,
+                 "filter bearing noise, rad (default: the source's)")
       ->check(CLI::PositiveNumber);
   cmd.add_option("--sigma-u0", w.sigma_control0,
                  "filter noise of the first control component (speed m/s for the cars, v for the "

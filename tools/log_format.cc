@@ -64,8 +64,8 @@ class Parser {
         if (tokens_.size() < 3) fail("scan needs 'scan T N' and N (range bearing id) triples");
         const std::uint64_t n = integer(2, "observation count");
         if (n > (tokens_.size() - 3) / 3 || tokens_.size() != 3 + 3 * n) {
-          fail("scan of " + std::to_string(n) + " observations needs " +
-               std::to_string(3 + 3 * n) + " fields, found " + std::to_string(tokens_.size()));
+          fail("scan of " + std::to_string(n) + " observations needs " + std::to_string(3 + 3 * n) +
+               " fields, found " + std::to_string(tokens_.size()));
         }
         e.kind = EventKind::kScan;
         e.first = log.observations.size();
@@ -91,8 +91,7 @@ class Parser {
         e.x = number(2, "x");
         e.y = number(3, "y");
       } else {
-        fail("unknown record '" + std::string(record) +
-             "' (control, scan, pose, gps or landmark)");
+        fail("unknown record '" + std::string(record) + "' (control, scan, pose, gps or landmark)");
       }
       e.time = number(1, "time");
       if (e.time < last_time) {
@@ -269,8 +268,7 @@ bool operator==(const LogHeader& a, const LogHeader& b) {
   const bool vp = m.kind != MotionKind::kVictoriaPark ||
                   (same_bits(m.geometry.a, n.geometry.a) && same_bits(m.geometry.b, n.geometry.b) &&
                    same_bits(m.geometry.l, n.geometry.l) && same_bits(m.geometry.h, n.geometry.h));
-  return m.kind == n.kind && car && vp &&
-         same_bits(m.sigma_control[0], n.sigma_control[0]) &&
+  return m.kind == n.kind && car && vp && same_bits(m.sigma_control[0], n.sigma_control[0]) &&
          same_bits(m.sigma_control[1], n.sigma_control[1]) &&
          same_bits(s.sigma_range, t.sigma_range) && same_bits(s.sigma_bearing, t.sigma_bearing) &&
          same_bits(s.max_range, t.max_range) && same_bits(s.field_of_view, t.field_of_view) &&
@@ -335,8 +333,8 @@ LogWriter::LogWriter(std::ostream& out, const LogHeader& h) : out_(out), last_ti
   const engine::SensorConfig& s = h.sensor;
   for (double v : {m.wheelbase, m.geometry.a, m.geometry.b, m.geometry.l, m.geometry.h,
                    m.sigma_control[0], m.sigma_control[1], s.sigma_range, s.sigma_bearing,
-                   s.max_range, s.field_of_view, s.offset.x, s.offset.y, s.offset.yaw,
-                   h.start_time, h.start_pose[0], h.start_pose[1], h.start_pose[2]}) {
+                   s.max_range, s.field_of_view, s.offset.x, s.offset.y, s.offset.yaw, h.start_time,
+                   h.start_pose[0], h.start_pose[1], h.start_pose[2]}) {
     require_finite(v, "a header value");
   }
   std::string& l = line_;
@@ -452,7 +450,8 @@ void LogWriter::event(const Log& log, const Event& e) {
       if (e.first > log.observations.size() || e.count > log.observations.size() - e.first) {
         throw std::invalid_argument("LogWriter: a scan's observations are out of bounds");
       }
-      scan(e.time, std::span<const engine::Observation>(log.observations).subspan(e.first, e.count));
+      scan(e.time,
+           std::span<const engine::Observation>(log.observations).subspan(e.first, e.count));
       return;
     }
     case EventKind::kTruthPose:

@@ -64,9 +64,9 @@ struct TruthLandmark {
 
 struct Log {
   LogHeader header;
-  std::vector<Event> events;                     // time order (non-decreasing)
-  std::vector<engine::Observation> observations; // of all scans; id -1 = no id
-  std::vector<TruthLandmark> landmarks;          // ids unique
+  std::vector<Event> events;                      // time order (non-decreasing)
+  std::vector<engine::Observation> observations;  // of all scans; id -1 = no id
+  std::vector<TruthLandmark> landmarks;           // ids unique
   friend bool operator==(const Log& a, const Log& b);
 };
 

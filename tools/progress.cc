@@ -71,13 +71,14 @@ std::string format_progress(const ProgressState& s, double elapsed, int bar_widt
     line += rate > 0 && s.done <= s.total ? clock((s.total - s.done) / rate) : "?";
     line += "  ";
   }
-  line += "M " + std::to_string(s.particles) + "  " + count(double(s.landmarks)) +
-          " landmarks  " + bytes(double(s.map_bytes));
+  line += "M " + std::to_string(s.particles) + "  " + count(double(s.landmarks)) + " landmarks  " +
+          bytes(double(s.map_bytes));
   return line;
 }
 
 ProgressBar::ProgressBar(bool enabled, std::FILE* out)
-    : out_(out), enabled_(enabled && out != nullptr && isatty(fileno(out)) != 0),
+    : out_(out),
+      enabled_(enabled && out != nullptr && isatty(fileno(out)) != 0),
       start_(Clock::now()) {}
 
 bool ProgressBar::due() {

@@ -15,8 +15,8 @@
 namespace fastslam::tools {
 
 struct ProgressState {
-  std::uint64_t done = 0;    // steps (controls) done
-  std::uint64_t total = 0;   // expected steps; 0 when unknown (no bar, no ETA)
+  std::uint64_t done = 0;   // steps (controls) done
+  std::uint64_t total = 0;  // expected steps; 0 when unknown (no bar, no ETA)
   std::uint32_t particles = 0;
   std::uint64_t landmarks = 0;  // in the map shown (e.g. the first particle's)
   std::int64_t map_bytes = 0;   // live bytes of all maps
@@ -24,8 +24,7 @@ struct ProgressState {
 
 // "[#####.....]  45.2%  12.3k/27.0k steps  4.10k steps/s  ETA 0:03  M 100  1.23k landmarks
 // 12.3 MB" for `elapsed_seconds` since the start.
-std::string format_progress(const ProgressState& state, double elapsed_seconds,
-                            int bar_width = 24);
+std::string format_progress(const ProgressState& state, double elapsed_seconds, int bar_width = 24);
 
 class ProgressBar {
  public:

@@ -215,9 +215,9 @@ double landmark_rmse(const std::vector<engine::MapLandmark>& map,
     std::sort(sorted.begin(), sorted.end(),
               [](const TruthLandmark& a, const TruthLandmark& b) { return a.id < b.id; });
     for (const engine::MapLandmark& l : map) {
-      auto it = std::lower_bound(
-          sorted.begin(), sorted.end(), l.id,
-          [](const TruthLandmark& a, std::uint64_t id) { return a.id < id; });
+      auto it =
+          std::lower_bound(sorted.begin(), sorted.end(), l.id,
+                           [](const TruthLandmark& a, std::uint64_t id) { return a.id < id; });
       if (it == sorted.end() || it->id != l.id) {
         throw std::runtime_error("estimated landmark id " + std::to_string(l.id) +
                                  " is not a true landmark");
@@ -513,10 +513,11 @@ int convert_to_log(const RunOptions& options) {
     const VictoriaPark vp = read_victoria_park(options.data);
     write_log(partial, vp.log);
     events = vp.log.events.size();
-    std::printf("Victoria Park: %zu controls, %zu scans, %zu detections (%zu gated out), %zu GPS "
-                "fixes, initial heading %.2f deg (GPS fit RMS %.2f m)\n",
-                vp.odometry_samples, vp.scans, vp.detections, vp.gated_out, vp.gps_fixes,
-                vp.initial_heading * 180 / std::numbers::pi, vp.heading_fit_rms_m);
+    std::printf(
+        "Victoria Park: %zu controls, %zu scans, %zu detections (%zu gated out), %zu GPS "
+        "fixes, initial heading %.2f deg (GPS fit RMS %.2f m)\n",
+        vp.odometry_samples, vp.scans, vp.detections, vp.gated_out, vp.gps_fixes,
+        vp.initial_heading * 180 / std::numbers::pi, vp.heading_fit_rms_m);
   } else {
     throw std::invalid_argument("convert --source '" + options.source +
                                 "' is not supported (sim or victoria-park)");

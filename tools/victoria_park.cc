@@ -114,8 +114,8 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
     const std::string path = dir + "/tree_observations.csv";
     CsvReader reader(path, {"time_s", "scan_index", "range_m", "bearing_rad", "diameter_m"});
     std::array<double, 5> row{};
-    std::size_t scan = 0;         // the scan being filled
-    std::uint64_t in_scan = 0;    // detections read for it
+    std::size_t scan = 0;       // the scan being filled
+    std::uint64_t in_scan = 0;  // detections read for it
     Event e;
     e.kind = EventKind::kScan;
     auto close_scans_before = [&](std::size_t next) {
@@ -123,8 +123,7 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
       for (; scan < next; ++scan) {
         if (in_scan != scan_trees[scan]) {
           reader.fail("scan " + std::to_string(scan) + " has " + std::to_string(in_scan) +
-                      " detections, laser_scan_times.csv says " +
-                      std::to_string(scan_trees[scan]));
+                      " detections, laser_scan_times.csv says " + std::to_string(scan_trees[scan]));
         }
         e.time = scan_time[scan];
         events.push_back(e);

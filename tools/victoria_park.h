@@ -43,8 +43,8 @@ namespace fastslam::tools {
 //   margin of about 2.9 deg on each side of the 180 deg scan (README), so anything outside is
 //   not a detector output.
 struct VictoriaParkGate {
-  double min_range = 5.0;                                  // m
-  double max_range = 70.0;                                 // m
+  double min_range = 5.0;                                       // m
+  double max_range = 70.0;                                      // m
   double min_bearing = -(90.0 - 2.9) * std::numbers::pi / 180;  // rad, vehicle frame
   double max_bearing = (90.0 - 2.9) * std::numbers::pi / 180;   // rad
 };
@@ -57,10 +57,10 @@ struct VictoriaParkOptions {
   // variance 0.2 (m/s)^2, steering 0.025 rad^2, range 0.025 m^2, bearing 2.5e-5 rad^2) before
   // that configuration's inflation factors (15 for the process, 75 for the measurements):
   // expect to inflate them when tuning.
-  double sigma_speed = 0.4472135954999579;     // m/s, sqrt(0.2)
-  double sigma_steer = 0.15811388300841897;    // rad, sqrt(0.025)
-  double sigma_range = 0.15811388300841897;    // m, sqrt(0.025)
-  double sigma_bearing = 0.005;                // rad, sqrt(2.5e-5)
+  double sigma_speed = 0.4472135954999579;   // m/s, sqrt(0.2)
+  double sigma_steer = 0.15811388300841897;  // rad, sqrt(0.025)
+  double sigma_range = 0.15811388300841897;  // m, sqrt(0.025)
+  double sigma_bearing = 0.005;              // rad, sqrt(2.5e-5)
   // Initial heading: when unset, fitted to GPS. The odometry is dead-reckoned from the first
   // fix with heading 0 over the first `heading_fit_seconds`; the heading is the rotation about
   // the first fix that best aligns (least squares, closed form) the dead-reckoned positions at
@@ -79,8 +79,8 @@ struct VictoriaPark {
   std::size_t detections = 0;        // in tree_observations.csv
   std::size_t gated_out = 0;         // detections dropped by the gate
   std::size_t gps_fixes = 0;
-  double initial_heading = 0.0;      // rad, as fitted or given
-  double heading_fit_rms_m = 0.0;    // RMS distance of the fitted dead reckoning to GPS
+  double initial_heading = 0.0;    // rad, as fitted or given
+  double heading_fit_rms_m = 0.0;  // RMS distance of the fitted dead reckoning to GPS
 };
 
 // Reads odometry.csv, laser_scan_times.csv, tree_observations.csv and gps.csv from `dir`.

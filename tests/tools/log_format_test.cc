@@ -171,8 +171,9 @@ TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
       {"fastslam-log 1\nmotion bicycle 4\n", "x.log:2: unknown motion kind 'bicycle'"},
       {"fastslam-log 1\nmotion bailey-car\n", "x.log:2: 'motion' needs 3 fields"},
       {"fastslam-log 1\nmotion bailey-car -4\n", "x.log:2: wheelbase must be > 0"},
-      {"fastslam-log 1\nmotion unicycle\nmotion unicycle\n", "x.log:3: header line 'motion' is "
-                                                            "repeated"},
+      {"fastslam-log 1\nmotion unicycle\nmotion unicycle\n",
+       "x.log:3: header line 'motion' is "
+       "repeated"},
       {"fastslam-log 1\ncolour blue\n", "x.log:2: unknown header line 'colour'"},
       {"fastslam-log 1\nmotion unicycle\ncontrol_noise 1 1\nsensor 1 1 1 1 0 0 0\nend_header\n",
        "x.log:5: header has no 'start' line"},
@@ -217,8 +218,7 @@ TEST(LogFormat, NothingPartialAndAMissingFileIsNamed) {
   try {
     read_log("/nonexistent/dir/x.log");
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("/nonexistent/dir/x.log: cannot open"),
-              std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/dir/x.log: cannot open"), std::string::npos);
   }
 }
 

@@ -94,7 +94,6 @@ TEST(RunCommand, SmallGridRunsWithBothAlgorithms) {
   }
 }
 
-
 nlohmann::json read_metrics(const std::string& dir) {
   std::ifstream in(dir + "/metrics.json");
   return nlohmann::json::parse(in);
@@ -137,9 +136,9 @@ TEST(RunCommand, LogRoundTripGivesTheDirectRunsMetrics) {
     ASSERT_EQ(run_simulation(from_log), 0);
     const nlohmann::json direct = read_metrics(o.out);
     const nlohmann::json logged = read_metrics(from_log.out);
-    for (const char* key : {"steps", "scans", "observations", "landmarks", "true_landmarks",
-                            "resamples", "pose_rmse_m", "landmark_rmse_m",
-                            "final_position_error_m", "live_tree_nodes"}) {
+    for (const char* key :
+         {"steps", "scans", "observations", "landmarks", "true_landmarks", "resamples",
+          "pose_rmse_m", "landmark_rmse_m", "final_position_error_m", "live_tree_nodes"}) {
       ASSERT_TRUE(direct.contains(key)) << key;
       EXPECT_EQ(direct[key], logged[key]) << key;  // bit-identical doubles
     }
@@ -178,17 +177,17 @@ TEST(RunCommand, GpsAndPoseErrorsInterpolateAndSkipGaps) {
     e.y = y;
     log.events.push_back(e);
   };
-  fix(EventKind::kGps, 0.0, 0.0, 0.0);           // at the start: error 0
+  fix(EventKind::kGps, 0.0, 0.0, 0.0);  // at the start: error 0
   for (int k = 1; k <= 100; ++k) {
     control(k / 10.0, 0.1);
     if (k == 5) fix(EventKind::kGps, 0.55, 0.55 + 3.0, 0.0);  // between estimates: error 3
     if (k == 50) fix(EventKind::kTruthPose, 5.0, 5.0, 1.0);   // pose error 1
     if (k == 60) fix(EventKind::kGps, 6.0, 6.0, 4.0);         // error 4
   }
-  fix(EventKind::kGps, 11.0, 11.0, 0.0);           // inside the gap below: skipped
-  control(12.0, 2.0);                              // the estimate jumps 2 s: a gap
-  fix(EventKind::kGps, 12.0, 12.0, 0.0);           // exactly at an estimate: error 0
-  fix(EventKind::kGps, 13.0, 13.0, 0.0);           // after the last estimate: skipped
+  fix(EventKind::kGps, 11.0, 11.0, 0.0);  // inside the gap below: skipped
+  control(12.0, 2.0);                     // the estimate jumps 2 s: a gap
+  fix(EventKind::kGps, 12.0, 12.0, 0.0);  // exactly at an estimate: error 0
+  fix(EventKind::kGps, 13.0, 13.0, 0.0);  // after the last estimate: skipped
   const std::string path = temp_dir("gps") + ".log";
   write_log(path, log);
   RunOptions o;

@@ -156,8 +156,9 @@ TEST_F(VictoriaParkFiles, RefusesEveryMalformedClassNamingFileLineAndReason) {
       {"odometry.csv", odo + "1,2\n", "odometry.csv:2: expected 3 columns, found 2"},
       {"odometry.csv", odo + "1,2,3,4\n", "odometry.csv:2: expected 3 columns, found 4"},
       {"odometry.csv", odo + "1,fast,0\n", "odometry.csv:2: column 'speed_mps': 'fast' is not"},
-      {"odometry.csv", odo + "1,nan,0\n", "odometry.csv:2: column 'speed_mps': value 'nan' is not "
-                                          "finite"},
+      {"odometry.csv", odo + "1,nan,0\n",
+       "odometry.csv:2: column 'speed_mps': value 'nan' is not "
+       "finite"},
       {"odometry.csv", odo + "1,1,-inf\n", "odometry.csv:2: column 'steering_rad': value '-inf'"},
       {"odometry.csv", odo + "1,1,0\n0.9,1,0\n", "odometry.csv:3: time goes backwards"},
       {"gps.csv", gps + "1,2,3\n0.5,2,3\n", "gps.csv:3: time goes backwards"},
