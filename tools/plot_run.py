@@ -1,6 +1,6 @@
 #!/usr/bin/python3
-"""Draws a `fastslam run` output directory: true path, estimated path, true landmarks and the
-estimated map (with 2-sigma ellipses when few enough), into DIR/run.png.
+"""Draws a `fastslam run` output directory: true path, GPS fixes, estimated path, true landmarks
+and the estimated map (with 2-sigma ellipses when few enough), into DIR/run.png.
 
 Usage: tools/plot_run.py DIR   (Debian's python3-matplotlib; run with /usr/bin/python3)
 """
@@ -35,6 +35,7 @@ def main():
     out = sys.argv[1]
     truth = thin(read(os.path.join(out, "truth.csv")))
     est = thin(read(os.path.join(out, "trajectory.csv")))
+    gps = read(os.path.join(out, "gps.csv"))
     true_lm = read(os.path.join(out, "true_landmarks.csv"))
     lm = read(os.path.join(out, "landmarks.csv"))
     metrics = {}
@@ -61,6 +62,9 @@ def main():
     if truth:
         ax.plot([r["x"] for r in truth], [r["y"] for r in truth], color="k", lw=0.8,
                 label="true path")
+    if gps:
+        ax.scatter([r["x"] for r in gps], [r["y"] for r in gps], s=1, color="tab:green",
+                   label="GPS fixes")
     if est:
         ax.plot([r["x"] for r in est], [r["y"] for r in est], color="tab:blue", lw=0.8,
                 label="estimated path (weighted mean)")
@@ -69,6 +73,8 @@ def main():
         title = "{} M={} seed={}: pose RMSE {:.2f} m, landmark RMSE {:.2f} m".format(
             metrics.get("algorithm"), metrics.get("particles"), metrics.get("seed"),
             metrics.get("pose_rmse_m", float("nan")), metrics.get("landmark_rmse_m", float("nan")))
+        if "gps_rmse_m" in metrics:
+            title += ", GPS RMSE {:.2f} m".format(metrics["gps_rmse_m"])
     ax.set_title(title, fontsize=10)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")

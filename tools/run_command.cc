@@ -1,24 +1,31 @@
 #include "tools/run_command.h"
 
 #include <sys/resource.h>
-#include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <algorithm>
 #include <memory>
+#include <numbers>
+#include <optional>
 #include <span>
 #include <stdexcept>
+#include <unordered_map>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 #include <oneapi/tbb/info.h>
 
+#include "engine/angles.h"
 #include "engine/filter.h"
 #include "tools/map_evaluation.h"
+#include "tools/log_format.h"
+#include "tools/progress.h"
+#include "tools/tum.h"
+#include "tools/victoria_park.h"
 
 namespace fastslam::tools {
 namespace {
@@ -47,140 +54,343 @@ World make_world(const RunOptions& o) {
   throw std::invalid_argument("unknown --world '" + o.world + "' (grid or loop)");
 }
 
-// A one-line progress bar on stderr, redrawn at most ten times a second.
-class Progress {
+// Where events come from. `next` returns the next event in time order (a scan's observations
+// in `scan`), false at the end.
+class EventSource {
  public:
-  explicit Progress(bool enabled) : enabled_(enabled && isatty(STDERR_FILENO) != 0) {}
-  void update(double fraction, std::uint64_t scans, std::uint64_t observations) {
-    if (!enabled_) return;
-    const auto now = Clock::now();
-    if (now - last_ < std::chrono::milliseconds(100) && fraction < 1.0) return;
-    last_ = now;
-    const int width = 40;
-    const int filled = static_cast<int>(fraction * width);
-    std::fprintf(stderr, "\r[%.*s%*s] %5.1f%%  %llu scans  %llu observations", filled,
-                 "########################################", width - filled, "", 100 * fraction,
-                 static_cast<unsigned long long>(scans),
-                 static_cast<unsigned long long>(observations));
-    std::fflush(stderr);
-  }
-  void finish() {
-    if (enabled_) std::fprintf(stderr, "\n");
+  virtual ~EventSource() = default;
+  virtual bool next(Event& event, std::vector<engine::Observation>& scan) = 0;
+};
+
+// Bailey's simulator, step by step: per control step a control, the truth pose after it, and
+// the scan taken at its end, all stamped with the time at the end of the step.
+class SimSource final : public EventSource {
+ public:
+  // `clutter`: pass false alarms on (id -1); known association sees true detections only.
+  SimSource(const World& world, const SimConfig& config, std::uint64_t seed, bool clutter)
+      : sim_(world, config, seed), clutter_(clutter) {}
+  bool next(Event& e, std::vector<engine::Observation>& scan) override {
+    e = Event{};
+    e.time = t_;
+    if (stage_ == 1) {
+      stage_ = step_.has_scan ? 2 : 0;
+      e.kind = EventKind::kTruthPose;
+      e.x = step_.truth.x;
+      e.y = step_.truth.y;
+      e.theta = step_.truth.theta;
+      return true;
+    }
+    if (stage_ == 2) {
+      stage_ = 0;
+      e.kind = EventKind::kScan;
+      scan.clear();
+      for (const SimObservation& z : step_.scan) {
+        if (z.landmark == kClutter) {
+          if (clutter_) scan.push_back({z.range, z.bearing, -1});
+          continue;
+        }
+        scan.push_back({z.range, z.bearing, static_cast<std::int64_t>(z.landmark)});
+      }
+      e.count = static_cast<std::uint32_t>(scan.size());
+      return true;
+    }
+    if (!sim_.next(step_)) return false;
+    t_ += step_.dt;
+    e.time = t_;
+    e.kind = EventKind::kControl;
+    e.dt = step_.dt;
+    e.control = {step_.speed, step_.steer};
+    stage_ = 1;
+    return true;
   }
 
  private:
-  bool enabled_;
-  Clock::time_point last_{};
+  Simulator sim_;
+  bool clutter_;
+  SimStep step_;
+  double t_ = 0.0;
+  int stage_ = 0;  // 0: next is a control; 1: the truth pose; 2: the scan
 };
+
+class LogSource final : public EventSource {
+ public:
+  explicit LogSource(const Log& log) : log_(log) {}
+  bool next(Event& e, std::vector<engine::Observation>& scan) override {
+    if (i_ == log_.events.size()) return false;
+    e = log_.events[i_++];
+    if (e.kind == EventKind::kScan) {
+      const auto first = log_.observations.begin() + static_cast<std::ptrdiff_t>(e.first);
+      scan.assign(first, first + e.count);
+    }
+    return true;
+  }
+
+ private:
+  const Log& log_;
+  std::size_t i_ = 0;
+};
+
+// The log header of a simulated world: Bailey's car and sensor with the simulator's noises.
+LogHeader sim_header(const RunOptions& o, const World& world) {
+  LogHeader h;
+  h.motion.kind = engine::MotionKind::kBaileyCar;
+  h.motion.wheelbase = o.sim.wheelbase;
+  h.motion.sigma_control[0] = o.sim.sigma_v;
+  h.motion.sigma_control[1] = o.sim.sigma_steer;
+  h.sensor.sigma_range = o.sim.sigma_range;
+  h.sensor.sigma_bearing = o.sim.sigma_bearing;
+  h.sensor.max_range = o.sim.max_range;
+  h.sensor.field_of_view = o.sim.field_of_view;
+  h.start_time = 0.0;
+  h.start_pose[0] = world.start_x;
+  h.start_pose[1] = world.start_y;
+  h.start_pose[2] = world.start_theta;
+  return h;
+}
+
+std::vector<TruthLandmark> truth_landmarks(const World& world) {
+  std::vector<TruthLandmark> out(world.landmarks.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    out[i] = {i, world.landmarks[i].x, world.landmarks[i].y};
+  }
+  return out;
+}
+
+// The filter's configuration: the options' algorithm, particles, ...; the models of the
+// source's header; the noise overrides.
+engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
+  engine::FilterConfig config = o.filter;
+  config.record_trajectory = true;
+  config.motion = h.motion;
+  config.sensor = h.sensor;
+  if (o.noise.sigma_range) config.sensor.sigma_range = *o.noise.sigma_range;
+  if (o.noise.sigma_bearing) config.sensor.sigma_bearing = *o.noise.sigma_bearing;
+  if (o.noise.sigma_control0) config.motion.sigma_control[0] = *o.noise.sigma_control0;
+  if (o.noise.sigma_control1) config.motion.sigma_control[1] = *o.noise.sigma_control1;
+  for (int k = 0; k < 5; ++k) config.initial_pose[k] = k < 3 ? h.start_pose[k] : 0.0;
+  return config;
+}
+
+// The estimate at time t: the last sample stamped exactly t, else the interpolation between
+// the samples around t when they are at most kMaxInterpolationGap apart. REQUIRES: samples in
+// time order.
+std::optional<StampedPose> pose_at(const std::vector<StampedPose>& samples, double t) {
+  auto it = std::upper_bound(samples.begin(), samples.end(), t,
+                             [](double v, const StampedPose& p) { return v < p.time; });
+  if (it != samples.begin() && std::prev(it)->time == t) return *std::prev(it);
+  if (it == samples.begin() || it == samples.end()) return std::nullopt;
+  const StampedPose& a = *std::prev(it);
+  const StampedPose& b = *it;
+  if (b.time - a.time > kMaxInterpolationGap) return std::nullopt;
+  const double f = (t - a.time) / (b.time - a.time);
+  return StampedPose{t, a.x + f * (b.x - a.x), a.y + f * (b.y - a.y),
+                     engine::wrap_angle(a.theta + f * engine::wrap_angle(b.theta - a.theta))};
+}
+
+struct Errors {
+  double rmse = 0.0;
+  double last = 0.0;  // at the last reference used
+  std::size_t used = 0, skipped = 0;
+};
+
+Errors position_errors(const std::vector<StampedPose>& estimate,
+                       const std::vector<StampedPose>& reference) {
+  Errors e;
+  double se = 0.0;
+  for (const StampedPose& r : reference) {
+    const std::optional<StampedPose> p = pose_at(estimate, r.time);
+    if (!p) {
+      ++e.skipped;
+      continue;
+    }
+    const double d2 = (p->x - r.x) * (p->x - r.x) + (p->y - r.y) * (p->y - r.y);
+    se += d2;
+    e.last = std::sqrt(d2);
+    ++e.used;
+  }
+  e.rmse = e.used == 0 ? 0.0 : std::sqrt(se / e.used);
+  return e;
+}
+
+// Landmark RMSE of the estimated map under known association: each against its true landmark.
+double landmark_rmse_by_id(const std::vector<engine::MapLandmark>& map,
+                           const std::vector<TruthLandmark>& truth) {
+  if (map.empty() || truth.empty()) return 0.0;
+  double se = 0.0;
+  {
+    std::vector<TruthLandmark> sorted = truth;
+    std::sort(sorted.begin(), sorted.end(),
+              [](const TruthLandmark& a, const TruthLandmark& b) { return a.id < b.id; });
+    for (const engine::MapLandmark& l : map) {
+      auto it =
+          std::lower_bound(sorted.begin(), sorted.end(), l.id,
+                           [](const TruthLandmark& a, std::uint64_t id) { return a.id < id; });
+      if (it == sorted.end() || it->id != l.id) {
+        throw std::runtime_error("estimated landmark id " + std::to_string(l.id) +
+                                 " is not a true landmark");
+      }
+      se += (l.x - it->x) * (l.x - it->x) + (l.y - it->y) * (l.y - it->y);
+    }
+  }
+  return std::sqrt(se / map.size());
+}
+
+// A run's source: its events, header, truth landmarks and how many controls to expect.
+struct Source {
+  LogHeader header;
+  std::vector<TruthLandmark> landmarks;
+  std::unique_ptr<EventSource> events;
+  double expected_controls = 0.0;  // for the progress bar; 0: unknown
+  std::string name;                // "world" in metrics.json
+  // Owned data the events borrow.
+  std::unique_ptr<World> world;
+  std::unique_ptr<Log> log;
+};
+
+Source open_source(const RunOptions& o) {
+  Source s;
+  if (o.source == "sim") {
+    s.world = std::make_unique<World>(make_world(o));
+    const World& world = *s.world;
+    s.header = sim_header(o, world);
+    s.landmarks = truth_landmarks(world);
+    s.events = std::make_unique<SimSource>(world, o.sim, o.filter.seed,
+                                           o.filter.association != engine::Association::kKnown);
+    // The route length bounds the number of steps, for the progress bar.
+    double route = 0.0;
+    for (std::size_t i = 0; i < world.waypoints.size(); ++i) {
+      const Point& a = world.waypoints[i];
+      const Point& b = world.waypoints[(i + 1) % world.waypoints.size()];
+      route += std::hypot(b.x - a.x, b.y - a.y);
+    }
+    s.expected_controls = std::max(1.0, route * o.sim.loops / (o.sim.speed * o.sim.dt));
+    s.name = o.landmarks_csv.empty() ? o.world : o.landmarks_csv;
+    return s;
+  }
+  if (o.source == "log") {
+    if (o.data.empty()) throw std::invalid_argument("--source log needs --data FILE.log");
+    s.log = std::make_unique<Log>(read_log(o.data));
+    s.header = s.log->header;
+    s.landmarks = s.log->landmarks;
+    s.events = std::make_unique<LogSource>(*s.log);
+    for (const Event& e : s.log->events) s.expected_controls += e.kind == EventKind::kControl;
+    s.name = o.data;
+    return s;
+  }
+  throw std::invalid_argument("--source '" + o.source + "' is not supported (sim or log)");
+}
+
+void write_poses_csv(std::ofstream& file, const std::vector<StampedPose>& poses) {
+  file << "t,x,y,theta\n";
+  char line[160];
+  for (const StampedPose& p : poses) {
+    std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f,%.6f\n", p.time, p.x, p.y, p.theta);
+    file << line;
+  }
+}
 
 }  // namespace
 
 int run_simulation(const RunOptions& options) {
-  if (options.source != "sim") {
-    throw std::invalid_argument("--source '" + options.source + "' is not supported yet (sim)");
-  }
-  const World world = make_world(options);
-  engine::FilterConfig config = options.filter;
-  config.record_trajectory = true;
-  config.sensor.sigma_range = options.sim.sigma_range;
-  config.sensor.sigma_bearing = options.sim.sigma_bearing;
-  config.sensor.max_range = options.sim.max_range;
-  config.sensor.field_of_view = options.sim.field_of_view;
-  config.motion.kind = engine::MotionKind::kBaileyCar;
-  config.motion.wheelbase = options.sim.wheelbase;
-  config.motion.sigma_control[0] = options.sim.sigma_v;
-  config.motion.sigma_control[1] = options.sim.sigma_steer;
-  config.initial_pose[0] = world.start_x;
-  config.initial_pose[1] = world.start_y;
-  config.initial_pose[2] = world.start_theta;
-
-  // The route length bounds the number of steps, for the progress bar.
-  double route = 0.0;
-  for (std::size_t i = 0; i < world.waypoints.size(); ++i) {
-    const Point& a = world.waypoints[i];
-    const Point& b = world.waypoints[(i + 1) % world.waypoints.size()];
-    route += std::hypot(b.x - a.x, b.y - a.y);
-  }
-  const double expected_steps =
-      std::max(1.0, route * options.sim.loops / (options.sim.speed * options.sim.dt));
-
-  Simulator sim(world, options.sim, config.seed);
+  Source source = open_source(options);
+  const engine::FilterConfig config = filter_config(options, source.header);
   engine::Filter filter(config);
-  Progress progress(options.progress);
-  std::vector<TruePose> truth;
-  std::vector<double> times;
-  std::unique_ptr<bool[]> observed_flags(new bool[world.landmarks.size()]());
-  const std::span<bool> observed(observed_flags.get(), world.landmarks.size());
+  ProgressBar progress(options.progress);
+  ProgressState state;
+  state.total = static_cast<std::uint64_t>(source.expected_controls);
+  state.particles = config.particles;
+  auto observe_state = [&] {
+    const engine::FilterStatistics st = filter.statistics();
+    state.done = st.controls;
+    state.landmarks = filter.particles().landmark_count(0);
+    state.map_bytes = st.live_bytes;
+  };
+
+  // One loop over the events of any source.
+  std::vector<double> control_times;
+  std::vector<StampedPose> truth;
+  std::vector<StampedPose> gps;
   std::vector<engine::Observation> scan;
-  SimStep step;
-  double sim_seconds = 0.0;
+  // Which true landmarks the run observed (by the ids the source gives its detections).
+  std::unordered_map<std::uint64_t, std::size_t> truth_slot;
+  for (std::size_t i = 0; i < source.landmarks.size(); ++i) truth_slot[source.landmarks[i].id] = i;
+  std::unique_ptr<bool[]> observed_flags(new bool[source.landmarks.size()]());
+  const std::span<bool> observed(observed_flags.get(), source.landmarks.size());
+  Event event;
+  double source_seconds = 0.0;
   double filter_seconds = 0.0;
-  double t = 0.0;
-  std::uint64_t scans = 0;
   for (;;) {
     const auto t0 = Clock::now();
-    if (!sim.next(step)) break;
+    if (!source.events->next(event, scan)) break;
     const auto t1 = Clock::now();
-    t += step.dt;
-    truth.push_back(step.truth);
-    times.push_back(t);
-    filter.predict({step.speed, step.steer}, step.dt);
-    if (step.has_scan) {
-      scan.clear();
-      for (const SimObservation& z : step.scan) {
-        if (z.landmark == kClutter) {
-          // Known ids are for true detections; unknown association must sort clutter out.
-          if (config.association == engine::Association::kKnown) continue;
-          scan.push_back({z.range, z.bearing, -1});
-          continue;
+    switch (event.kind) {
+      case EventKind::kControl:
+        filter.predict(event.control, event.dt);
+        control_times.push_back(event.time);
+        break;
+      case EventKind::kScan:
+        for (const engine::Observation& z : scan) {
+          if (z.id < 0) continue;
+          const auto found = truth_slot.find(static_cast<std::uint64_t>(z.id));
+          if (found != truth_slot.end()) observed[found->second] = true;
         }
-        observed[z.landmark] = true;
-        scan.push_back({z.range, z.bearing, static_cast<std::int64_t>(z.landmark)});
-      }
-      filter.observe(scan);
-      ++scans;
-      if (scans % 64 == 0) {
-        progress.update(std::min(1.0, double(truth.size()) / expected_steps), scans,
-                        filter.statistics().observations);
-      }
+        filter.observe(scan);
+        if (progress.due()) {
+          observe_state();
+          progress.draw(state);
+        }
+        break;
+      case EventKind::kTruthPose:
+        truth.push_back({event.time, event.x, event.y, event.theta});
+        break;
+      case EventKind::kGps:
+        gps.push_back({event.time, event.x, event.y, 0.0});
+        break;
     }
-    sim_seconds += std::chrono::duration<double>(t1 - t0).count();
+    source_seconds += std::chrono::duration<double>(t1 - t0).count();
     filter_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
   }
   const auto t_end = Clock::now();
   const engine::Estimate estimate = filter.estimate();
-  const std::vector<engine::TrajectoryPoint> trajectory = filter.take_trajectory();
+  const std::vector<engine::TrajectoryPoint> points = filter.take_trajectory();
   filter_seconds += std::chrono::duration<double>(Clock::now() - t_end).count();
-  progress.update(1.0, scans, filter.statistics().observations);
-  progress.finish();
+  if (progress.enabled()) {
+    observe_state();
+    progress.finish(state);
+  }
 
-  double pose_se = 0.0;
-  for (const engine::TrajectoryPoint& p : trajectory) {
-    const TruePose& s = truth[p.control];
-    pose_se += (p.x - s.x) * (p.x - s.x) + (p.y - s.y) * (p.y - s.y);
+  // The estimated trajectory: the start, then the pose after every control.
+  std::vector<StampedPose> trajectory;
+  trajectory.reserve(points.size() + 1);
+  trajectory.push_back({source.header.start_time, source.header.start_pose[0],
+                        source.header.start_pose[1], source.header.start_pose[2]});
+  for (const engine::TrajectoryPoint& p : points) {
+    trajectory.push_back({control_times.at(p.control), p.x, p.y, p.theta});
   }
-  const double pose_rmse = trajectory.empty() ? 0.0 : std::sqrt(pose_se / trajectory.size());
-  // Known ids: each landmark against its own true landmark. Unknown: paired by distance.
-  const TruthIndex truth_index(world.landmarks);
-  const MapScore score =
-      score_map(estimate.map, world.landmarks, truth_index, observed, options.match_radius);
-  double landmark_rmse = score.rmse_m;
-  if (config.association == engine::Association::kKnown) {
-    double landmark_se = 0.0;
-    for (const engine::MapLandmark& l : estimate.map) {
-      const Point& p = world.landmarks.at(l.id);
-      landmark_se += (l.x - p.x) * (l.x - p.x) + (l.y - p.y) * (l.y - p.y);
-    }
-    landmark_rmse = estimate.map.empty() ? 0.0 : std::sqrt(landmark_se / estimate.map.size());
+  const Errors pose = position_errors(trajectory, truth);
+  const Errors fixes = position_errors(trajectory, gps);
+  // Known ids: each landmark against its own. Unknown: paired with the truth by distance
+  // (tools/map_evaluation.h), which also counts spurious and missing landmarks.
+  std::vector<Point> truth_points(source.landmarks.size());
+  for (std::size_t i = 0; i < source.landmarks.size(); ++i) {
+    truth_points[i] = {source.landmarks[i].x, source.landmarks[i].y};
   }
+  const TruthIndex truth_index(truth_points);
+  const MapScore score = source.landmarks.empty()
+                             ? MapScore{}
+                             : score_map(estimate.map, truth_points, truth_index, observed,
+                                         options.match_radius);
+  const double map_rmse = config.association == engine::Association::kKnown
+                              ? landmark_rmse_by_id(estimate.map, source.landmarks)
+                              : score.rmse_m;
   const auto observed_count =
       static_cast<std::size_t>(std::count(observed.begin(), observed.end(), true));
   const engine::FilterStatistics stats = filter.statistics();
-  const TruePose& last = truth.back();
 
   nlohmann::json metrics = {
       {"source", options.source},
-      {"world", options.landmarks_csv.empty() ? options.world : options.landmarks_csv},
+      {"world", source.name},
+      {"motion", engine::to_string(config.motion.kind)},
       {"algorithm", engine::to_string(config.algorithm)},
       {"particles", config.particles},
       {"association", engine::to_string(config.association)},
@@ -189,16 +399,10 @@ int run_simulation(const RunOptions& options) {
       {"steps", stats.controls},
       {"scans", stats.scans},
       {"observations", stats.observations},
-      {"true_landmarks", world.landmarks.size()},
+      {"true_landmarks", source.landmarks.size()},
       {"landmarks", estimate.map.size()},
-      {"observed_landmarks", observed_count},
-      {"clutter_rate", options.sim.clutter_rate},
-      {"match_radius_m", options.match_radius},
-      {"matched_landmarks", score.matched},
-      {"spurious_landmarks", score.spurious},
-      {"missing_landmarks", score.missing},
       {"wall_seconds", filter_seconds},
-      {"simulator_seconds", sim_seconds},
+      {"source_seconds", source_seconds},
       {"seconds_per_phase",
        {{"predict", stats.predict_seconds},
         {"associate", stats.associate_seconds},
@@ -208,22 +412,53 @@ int run_simulation(const RunOptions& options) {
       {"live_tree_nodes", stats.live_nodes},
       {"live_tree_bytes", stats.live_bytes},
       {"peak_rss_bytes", peak_rss_bytes()},
-      {"pose_rmse_m", pose_rmse},
-      {"landmark_rmse_m", landmark_rmse},
-      {"final_position_error_m",
-       std::hypot(estimate.mean_pose[0] - last.x, estimate.mean_pose[1] - last.y)},
   };
+  if (options.source == "sim") metrics["simulator_seconds"] = source_seconds;
+  if (!truth.empty()) {
+    metrics["pose_rmse_m"] = pose.rmse;
+    const StampedPose& last = truth.back();
+    metrics["final_position_error_m"] =
+        std::hypot(estimate.mean_pose[0] - last.x, estimate.mean_pose[1] - last.y);
+  }
+  if (!source.landmarks.empty()) {
+    metrics["landmark_rmse_m"] = map_rmse;
+    metrics["observed_landmarks"] = observed_count;
+    metrics["match_radius_m"] = options.match_radius;
+    metrics["matched_landmarks"] = score.matched;
+    metrics["spurious_landmarks"] = score.spurious;
+    metrics["missing_landmarks"] = score.missing;
+  }
+  if (options.source == "sim") metrics["clutter_rate"] = options.sim.clutter_rate;
+  if (config.association != engine::Association::kKnown) {
+    metrics["landmarks_created"] = stats.landmarks_created;
+    metrics["landmarks_removed"] = stats.landmarks_removed;
+  }
+  if (!gps.empty()) {
+    metrics["gps_rmse_m"] = fixes.rmse;
+    metrics["final_gps_error_m"] = fixes.last;
+    metrics["gps_fixes_used"] = fixes.used;
+    metrics["gps_fixes_skipped"] = fixes.skipped;
+  }
   std::printf("%s, M = %u, %s association, seed %llu: %llu steps, %llu scans, %zu landmarks\n",
               std::string(engine::to_string(config.algorithm)).c_str(), config.particles,
               std::string(engine::to_string(config.association)).c_str(),
               static_cast<unsigned long long>(config.seed),
               static_cast<unsigned long long>(stats.controls),
               static_cast<unsigned long long>(stats.scans), estimate.map.size());
-  std::printf("  pose RMSE %.3f m, landmark RMSE %.3f m, filter %.3f s (simulator %.3f s)\n",
-              pose_rmse, landmark_rmse, filter_seconds, sim_seconds);
-  std::printf("  map: %zu matched within %.1f m, %zu spurious, %zu of %zu observed missing\n",
-              score.matched, options.match_radius, score.spurious, score.missing,
-              observed_count);
+  std::printf(" ");
+  if (!truth.empty()) std::printf(" pose RMSE %.3f m,", pose.rmse);
+  if (!source.landmarks.empty()) std::printf(" landmark RMSE %.3f m,", map_rmse);
+  if (!gps.empty()) {
+    std::printf(" GPS RMSE %.3f m (%zu fixes, %zu skipped), at the end %.3f m,", fixes.rmse,
+                fixes.used, fixes.skipped, fixes.last);
+  }
+  std::printf(" filter %.3f s (%s %.3f s)\n", filter_seconds,
+              options.source == "sim" ? "simulator" : "reading", source_seconds);
+  if (!source.landmarks.empty()) {
+    std::printf("  map: %zu matched within %.1f m, %zu spurious, %zu of %zu observed missing\n",
+                score.matched, options.match_radius, score.spurious, score.missing,
+                observed_count);
+  }
   if (options.out.empty()) return 0;
 
   std::filesystem::create_directories(options.out);
@@ -233,15 +468,15 @@ int run_simulation(const RunOptions& options) {
     return file;
   };
   open("metrics.json") << metrics.dump(2) << '\n';
+  // The poses after the controls (the start is not a control's).
+  const std::span<const StampedPose> after_controls(trajectory.data() + 1, trajectory.size() - 1);
   {
     std::ofstream file = open("trajectory.csv");
-    file << "t,x,y,theta\n";
-    char line[160];
-    for (const engine::TrajectoryPoint& p : trajectory) {
-      std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f,%.6f\n", times[p.control], p.x, p.y,
-                    p.theta);
-      file << line;
-    }
+    write_poses_csv(file, std::vector<StampedPose>(after_controls.begin(), after_controls.end()));
+  }
+  {
+    std::ofstream file = open("trajectory.tum");
+    write_tum(file, after_controls);
   }
   {
     std::ofstream file = open("landmarks.csv");
@@ -253,28 +488,87 @@ int run_simulation(const RunOptions& options) {
       file << line;
     }
   }
-  {
+  std::string written = "metrics.json,trajectory.csv,trajectory.tum,landmarks.csv";
+  if (!truth.empty()) {
     std::ofstream file = open("truth.csv");
-    file << "t,x,y,theta\n";
-    char line[160];
-    for (std::size_t k = 0; k < truth.size(); ++k) {
-      std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f,%.6f\n", times[k], truth[k].x, truth[k].y,
-                    truth[k].theta);
+    write_poses_csv(file, truth);
+    written += ",truth.csv";
+  }
+  if (!gps.empty()) {
+    std::ofstream file = open("gps.csv");
+    file << "t,x,y\n";
+    char line[120];
+    for (const StampedPose& g : gps) {
+      std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f\n", g.time, g.x, g.y);
       file << line;
     }
+    written += ",gps.csv";
   }
-  {
+  if (!source.landmarks.empty()) {
     std::ofstream file = open("true_landmarks.csv");
     file << "id,x,y\n";
     char line[120];
-    for (std::size_t i = 0; i < world.landmarks.size(); ++i) {
-      std::snprintf(line, sizeof(line), "%zu,%.6f,%.6f\n", i, world.landmarks[i].x,
-                    world.landmarks[i].y);
+    for (const TruthLandmark& l : source.landmarks) {
+      std::snprintf(line, sizeof(line), "%llu,%.6f,%.6f\n", static_cast<unsigned long long>(l.id),
+                    l.x, l.y);
       file << line;
     }
+    written += ",true_landmarks.csv";
   }
-  std::printf("  wrote %s/{metrics.json,trajectory.csv,landmarks.csv,truth.csv,true_landmarks.csv}\n",
-              options.out.c_str());
+  std::printf("  wrote %s/{%s}\n", options.out.c_str(), written.c_str());
+  return 0;
+}
+
+int convert_to_log(const RunOptions& options) {
+  if (options.out.empty()) throw std::invalid_argument("convert needs --out FILE.log");
+  const std::string partial = options.out + ".partial";
+  std::size_t events = 0;
+  if (options.source == "sim") {
+    const World world = make_world(options);
+    std::ofstream file(partial);
+    if (!file) throw std::runtime_error(partial + ": cannot open for writing");
+    LogWriter writer(file, sim_header(options, world));
+    for (const TruthLandmark& l : truth_landmarks(world)) writer.landmark(l);
+    SimSource sim(world, options.sim, options.filter.seed, /*clutter=*/true);
+    Event e;
+    std::vector<engine::Observation> scan;
+    while (sim.next(e, scan)) {
+      switch (e.kind) {
+        case EventKind::kControl:
+          writer.control(e.time, e.dt, e.control);
+          break;
+        case EventKind::kScan:
+          writer.scan(e.time, scan);
+          break;
+        case EventKind::kTruthPose:
+          writer.truth_pose(e.time, e.x, e.y, e.theta);
+          break;
+        case EventKind::kGps:
+          writer.gps(e.time, e.x, e.y);
+          break;
+      }
+      ++events;
+    }
+    file.close();
+    if (!file) throw std::runtime_error(partial + ": write failed");
+  } else if (options.source == "victoria-park") {
+    if (options.data.empty()) {
+      throw std::invalid_argument("--source victoria-park needs --data DIR");
+    }
+    const VictoriaPark vp = read_victoria_park(options.data);
+    write_log(partial, vp.log);
+    events = vp.log.events.size();
+    std::printf(
+        "Victoria Park: %zu controls, %zu scans, %zu detections (%zu gated out), %zu GPS "
+        "fixes, initial heading %.2f deg (GPS fit RMS %.2f m)\n",
+        vp.odometry_samples, vp.scans, vp.detections, vp.gated_out, vp.gps_fixes,
+        vp.initial_heading * 180 / std::numbers::pi, vp.heading_fit_rms_m);
+  } else {
+    throw std::invalid_argument("convert --source '" + options.source +
+                                "' is not supported (sim or victoria-park)");
+  }
+  std::filesystem::rename(partial, options.out);
+  std::printf("wrote %zu events to %s\n", events, options.out.c_str());
   return 0;
 }
 

@@ -1,13 +1,22 @@
-// `fastslam run`: a simulated world (Bailey's CSV maps, or a procedural grid or loop of any
-// size) driven through the Filter, with the metrics, the estimated trajectory and the final
-// map written to an output directory.
+// `fastslam run`: a source of events (a simulated world: Bailey's CSV maps, or a procedural
+// grid or loop of any size; or a native log file, tools/log_format.h) driven through the Filter
+// by one loop, with the metrics, the estimated trajectory and the final map written to an
+// output directory; and `fastslam convert`, which writes a source into a native log.
+//
+// Metrics against truth, whichever the source holds: pose RMSE against truth poses, landmark
+// RMSE against truth landmarks (by id under known association, else to the nearest true
+// landmark), GPS RMSE against GPS fixes. The estimate at a truth or GPS time is the
+// weighted-mean pose after the controls up to it, linearly interpolated between the two
+// estimates around it, and the fix is skipped (counted in gps_fixes_skipped) when those are
+// more than kMaxInterpolationGap apart or it lies outside the run.
 //
 // Ownership: plain options in; files out. Thread safety: one run per call; the filter runs its
-// own threads. Costs: the simulation plus the filter, O(steps x particles) and O(scans x
-// particles x observations x log N).
+// own threads. Costs: the source plus the filter, O(steps x particles) and O(scans x
+// particles x observations x log N); memory O(steps) for the trajectory and the truth.
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "engine/filter_config.h"
@@ -15,8 +24,19 @@
 
 namespace fastslam::tools {
 
+// Estimates more than this far apart in time are not interpolated between (seconds): a truth
+// pose or GPS fix falling in such a gap of the estimate is skipped. One second is 40 odometry
+// periods of Victoria Park and 40 control steps of Bailey's simulator.
+inline constexpr double kMaxInterpolationGap = 1.0;
+
+// Filter noises that replace the source's (a log header's, or the simulator's).
+struct NoiseOverrides {
+  std::optional<double> sigma_range, sigma_bearing, sigma_control0, sigma_control1;
+};
+
 struct RunOptions {
-  std::string source = "sim";  // only simulated worlds so far
+  std::string source = "sim";  // sim | log (convert: sim | victoria-park)
+  std::string data;            // log: the log file; victoria-park: the data set's directory
   // World: CSV files, or a procedural world ("grid" or "loop").
   std::string landmarks_csv;
   std::string waypoints_csv;
@@ -29,12 +49,18 @@ struct RunOptions {
   // Unknown association: estimated landmarks are paired with true ones within this distance
   // (tools/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
   double match_radius = 5.0;
+  NoiseOverrides noise;
   std::string out;            // output directory; empty: metrics to stdout only
   bool progress = true;       // a progress bar on stderr when it is a terminal
 };
 
-// Runs and returns the process exit code; throws std::exception with a clear message on bad
-// options or unreadable files.
+// Runs any source (the name is historical) and returns the process exit code; throws
+// std::exception with a clear message on bad options or unreadable files.
 int run_simulation(const RunOptions& options);
+
+// `fastslam convert`: writes the source (sim: the world and route of `options`, simulated with
+// its seed, truth poses and landmarks included; victoria-park: the data set in `data`) as a
+// native log to the file `options.out`. The file appears only when complete.
+int convert_to_log(const RunOptions& options);
 
 }  // namespace fastslam::tools

@@ -1,5 +1,6 @@
 #include "tools/run_command.h"
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -9,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tests/shared_data.h"
+#include "tools/log_format.h"
 
 namespace fastslam::tools {
 namespace {
@@ -120,6 +122,141 @@ TEST(RunCommand, SmallGridRunsWithBothAlgorithms) {
     EXPECT_LT(m["pose_rmse_m"].get<double>(), 20.0);
     std::filesystem::remove_all(o.out);
   }
+}
+
+nlohmann::json read_metrics(const std::string& dir) {
+  std::ifstream in(dir + "/metrics.json");
+  return nlohmann::json::parse(in);
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// The log round trip: a simulated world converted to a native log and run from it gives the
+// same metrics, trajectory and map as the direct run with the same seed, for both algorithms.
+TEST(RunCommand, LogRoundTripGivesTheDirectRunsMetrics) {
+  for (auto algorithm : {engine::Algorithm::kFastSlam1, engine::Algorithm::kFastSlam2}) {
+    RunOptions o;
+    o.progress = false;
+    o.world = "loop";
+    o.loop_length = 500.0;
+    o.filter.algorithm = algorithm;
+    o.filter.particles = 16;
+    o.filter.seed = 11;
+    o.sim.loops = 1;
+    const std::string log_path = temp_dir("round_trip") + ".log";
+    RunOptions convert = o;
+    convert.out = log_path;
+    ASSERT_EQ(convert_to_log(convert), 0);
+    EXPECT_FALSE(std::filesystem::exists(log_path + ".partial"));
+    const Log log = read_log(log_path);
+    EXPECT_EQ(log.header.motion.kind, engine::MotionKind::kBaileyCar);
+    EXPECT_GT(log.landmarks.size(), 100u);
+
+    o.out = temp_dir("direct");
+    ASSERT_EQ(run_simulation(o), 0);
+    RunOptions from_log = o;
+    from_log.source = "log";
+    from_log.data = log_path;
+    from_log.out = temp_dir("from_log");
+    ASSERT_EQ(run_simulation(from_log), 0);
+    const nlohmann::json direct = read_metrics(o.out);
+    const nlohmann::json logged = read_metrics(from_log.out);
+    for (const char* key :
+         {"steps", "scans", "observations", "landmarks", "true_landmarks", "resamples",
+          "pose_rmse_m", "landmark_rmse_m", "final_position_error_m", "live_tree_nodes"}) {
+      ASSERT_TRUE(direct.contains(key)) << key;
+      EXPECT_EQ(direct[key], logged[key]) << key;  // bit-identical doubles
+    }
+    EXPECT_GT(direct["steps"].get<int>(), 1000);
+    EXPECT_LT(direct["pose_rmse_m"].get<double>(), 20.0);
+    EXPECT_FALSE(logged.contains("gps_rmse_m"));
+    for (const char* file : {"trajectory.csv", "trajectory.tum", "landmarks.csv", "truth.csv"}) {
+      EXPECT_EQ(read_text(o.out + "/" + file), read_text(from_log.out + "/" + file)) << file;
+    }
+    std::filesystem::remove_all(o.out);
+    std::filesystem::remove_all(from_log.out);
+    std::filesystem::remove(log_path);
+  }
+}
+
+// GPS and pose errors against a path known exactly: a noise-free unicycle driving along +x at
+// 1 m/s (every particle follows it exactly), fixes off the path by known amounts.
+TEST(RunCommand, GpsAndPoseErrorsInterpolateAndSkipGaps) {
+  Log log;
+  log.header.motion.kind = engine::MotionKind::kUnicycle;
+  log.header.motion.sigma_control[0] = 0.0;
+  log.header.motion.sigma_control[1] = 0.0;
+  auto control = [&](double t, double dt) {
+    Event e;
+    e.kind = EventKind::kControl;
+    e.time = t;
+    e.dt = dt;
+    e.control = {1.0, 0.0};
+    log.events.push_back(e);
+  };
+  auto fix = [&](EventKind kind, double t, double x, double y) {
+    Event e;
+    e.kind = kind;
+    e.time = t;
+    e.x = x;
+    e.y = y;
+    log.events.push_back(e);
+  };
+  fix(EventKind::kGps, 0.0, 0.0, 0.0);  // at the start: error 0
+  for (int k = 1; k <= 100; ++k) {
+    control(k / 10.0, 0.1);
+    if (k == 5) fix(EventKind::kGps, 0.55, 0.55 + 3.0, 0.0);  // between estimates: error 3
+    if (k == 50) fix(EventKind::kTruthPose, 5.0, 5.0, 1.0);   // pose error 1
+    if (k == 60) fix(EventKind::kGps, 6.0, 6.0, 4.0);         // error 4
+  }
+  fix(EventKind::kGps, 11.0, 11.0, 0.0);  // inside the gap below: skipped
+  control(12.0, 2.0);                     // the estimate jumps 2 s: a gap
+  fix(EventKind::kGps, 12.0, 12.0, 0.0);  // exactly at an estimate: error 0
+  fix(EventKind::kGps, 13.0, 13.0, 0.0);  // after the last estimate: skipped
+  const std::string path = temp_dir("gps") + ".log";
+  write_log(path, log);
+  RunOptions o;
+  o.progress = false;
+  o.source = "log";
+  o.data = path;
+  o.filter.particles = 3;
+  o.out = temp_dir("gps_run");
+  ASSERT_EQ(run_simulation(o), 0);
+  const nlohmann::json m = read_metrics(o.out);
+  EXPECT_EQ(m["gps_fixes_used"], 4);
+  EXPECT_EQ(m["gps_fixes_skipped"], 2);
+  EXPECT_NEAR(m["gps_rmse_m"].get<double>(), std::sqrt((0.0 + 9.0 + 16.0 + 0.0) / 4), 1e-9);
+  EXPECT_NEAR(m["final_gps_error_m"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(m["pose_rmse_m"].get<double>(), 1.0, 1e-9);
+  EXPECT_EQ(m["steps"], 101);
+  EXPECT_FALSE(m.contains("landmark_rmse_m"));  // the log has no true landmarks
+  EXPECT_EQ(line_count(o.out + "/gps.csv"), 6u + 1);
+  EXPECT_EQ(line_count(o.out + "/trajectory.tum"), 101u + 1);
+  std::filesystem::remove_all(o.out);
+  std::filesystem::remove(path);
+}
+
+TEST(RunCommand, LogSourceRefusesAMissingOrMalformedLog) {
+  RunOptions o;
+  o.progress = false;
+  o.source = "log";
+  EXPECT_THROW(run_simulation(o), std::invalid_argument);  // no --data
+  o.data = temp_dir("bad") + ".log";
+  std::ofstream(o.data) << "fastslam-log 1\nmotion unicycle\n";
+  try {
+    run_simulation(o);
+    ADD_FAILURE() << "a truncated log was run";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(o.data + ":2: end of file inside the header"),
+              std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove(o.data);
 }
 
 }  // namespace

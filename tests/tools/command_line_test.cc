@@ -1,0 +1,99 @@
+#include "tools/command_line.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace fastslam::tools {
+namespace {
+
+class CommandLine : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    path_ = (std::filesystem::temp_directory_path() /
+             ("fastslam_config_test_" + std::to_string(::getpid()) + ".json"))
+                .string();
+  }
+  void TearDown() override { std::filesystem::remove(path_); }
+
+  // Parses `args` for `fastslam run` with `json` as the config file; returns the options.
+  RunOptions run(const std::string& json, const std::string& args) {
+    std::ofstream(path_) << json;
+    CLI::App app;
+    RunOptions o;
+    RunWords w;
+    add_run_options(app, o, w);
+    app.parse(args + " --config " + path_, false);
+    apply_json_config(app, w.config);
+    finish_run_options(app, w, o);
+    return o;
+  }
+  std::string error_of(const std::string& json, const std::string& args = "") {
+    try {
+      run(json, args);
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    return "(no error)";
+  }
+  std::string path_;
+};
+
+TEST_F(CommandLine, ConfigSetsWhatFlagsSetAndFlagsWin) {
+  const RunOptions o = run(R"({"particles": 42, "seed": 9, "algorithm": "fastslam2",
+                               "world": "loop", "loop-length": 750.5, "no-progress": true,
+                               "sigma-range": 0.25, "resample": "every", "source": "log",
+                               "data": "x.log", "loops": 3})",
+                           "--particles 7 --world grid");
+  EXPECT_EQ(o.filter.particles, 7u);  // the flag wins
+  EXPECT_EQ(o.world, "grid");         // the flag wins
+  EXPECT_EQ(o.filter.seed, 9u);
+  EXPECT_EQ(o.filter.algorithm, engine::Algorithm::kFastSlam2);
+  EXPECT_EQ(o.loop_length, 750.5);
+  EXPECT_FALSE(o.progress);
+  ASSERT_TRUE(o.noise.sigma_range.has_value());
+  EXPECT_EQ(*o.noise.sigma_range, 0.25);
+  EXPECT_FALSE(o.noise.sigma_bearing.has_value());  // not given anywhere: the source's
+  EXPECT_EQ(o.filter.resample.when, parallel::ResamplePolicy::When::kEveryStep);
+  EXPECT_EQ(o.source, "log");
+  EXPECT_EQ(o.data, "x.log");
+  EXPECT_EQ(o.sim.loops, 3);
+}
+
+TEST_F(CommandLine, WithoutConfigTheDefaultsStand) {
+  const RunOptions o = run("{}", "--sigma-u1 0.1");
+  EXPECT_EQ(o.filter.particles, 100u);
+  EXPECT_TRUE(o.progress);
+  EXPECT_EQ(o.sim.loops, 1);
+  EXPECT_FALSE(o.noise.sigma_range.has_value());
+  ASSERT_TRUE(o.noise.sigma_control1.has_value());
+  EXPECT_EQ(*o.noise.sigma_control1, 0.1);
+}
+
+TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
+  std::string e = error_of(R"({"particles": 10, "partcles": 5})");
+  EXPECT_NE(e.find(path_ + ": key 'partcles': unknown option"), std::string::npos) << e;
+  e = error_of(R"({"config": "other.json"})");
+  EXPECT_NE(e.find("key 'config': unknown option"), std::string::npos) << e;
+  e = error_of(R"({"particles": 0})");
+  EXPECT_NE(e.find("key 'particles':"), std::string::npos) << e;
+  e = error_of(R"({"world": "moon"})");
+  EXPECT_NE(e.find("key 'world':"), std::string::npos) << e;
+  e = error_of(R"({"particles": "many"})");
+  EXPECT_NE(e.find("key 'particles':"), std::string::npos) << e;
+  e = error_of(R"({"spacing": [1, 2]})");
+  EXPECT_NE(e.find("key 'spacing': value must be a number, a string or a boolean"),
+            std::string::npos)
+      << e;
+  e = error_of(R"([1, 2])");
+  EXPECT_NE(e.find(": expected one JSON object"), std::string::npos) << e;
+  e = error_of(R"({"particles": 10,)");
+  EXPECT_NE(e.find(": not valid JSON"), std::string::npos) << e;
+}
+
+}  // namespace
+}  // namespace fastslam::tools

@@ -1,0 +1,105 @@
+// The native log format (docs/log-format.md): a line-oriented text file with a header naming
+// the motion model, the sensor and the initial pose, then time-stamped records (controls, scans
+// with optional landmark ids, optional truth poses and GPS fixes) and untimed truth landmarks.
+// Any data set converted to it can be run by `fastslam run --source log`.
+//
+// Reading is strict: every refusal (unknown record, wrong field count, a field that is not a
+// number, NaN or infinity, a negative range or dt, time going backwards, a missing or repeated
+// header line, a repeated landmark id) throws std::runtime_error "<file>:<line>: <reason>" and
+// returns nothing partial. Writing prints every double in its shortest exact form
+// (std::to_chars), so write -> read gives back bit-identical doubles.
+//
+// Ownership: `Log` is a plain value; `LogWriter` borrows its stream, which must outlive it.
+// Thread safety: thread-compatible. Costs: O(bytes) to read or write; a `Log` holds every
+// event (about 80 bytes each) and every observation (24 bytes each).
+#pragma once
+
+#include <cstdint>
+#include <iosfwd>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "engine/filter.h"
+#include "engine/filter_config.h"
+
+namespace fastslam::tools {
+
+inline constexpr int kLogFormatVersion = 1;
+
+struct LogHeader {
+  // Kind, its parameters (wheelbase, geometry) and the control noise.
+  engine::MotionConfig motion;
+  // Noises, max range, field of view and the sensor's offset on the vehicle.
+  engine::SensorConfig sensor;
+  // The pose every particle starts from, and the time it holds at.
+  double start_time = 0.0;
+  double start_pose[3] = {0.0, 0.0, 0.0};
+  // Bit-exact comparison of what a log holds: the motion parameters of `motion.kind` only.
+  friend bool operator==(const LogHeader& a, const LogHeader& b);
+};
+
+enum class EventKind : std::uint8_t { kControl, kScan, kTruthPose, kGps };
+
+// One timed record. Which fields mean something depends on `kind`.
+struct Event {
+  EventKind kind = EventKind::kControl;
+  double time = 0.0;  // s; a control is stamped at the END of the interval it covers
+  // kControl: the control held over (time - dt, time].
+  double dt = 0.0;
+  engine::Control control;
+  // kTruthPose: the true pose at `time`; kGps: a position fix (theta unused, 0).
+  double x = 0.0, y = 0.0, theta = 0.0;
+  // kScan: its observations are Log::observations[first, first + count).
+  std::uint64_t first = 0;
+  std::uint32_t count = 0;
+  friend bool operator==(const Event& a, const Event& b);
+};
+
+struct TruthLandmark {
+  std::uint64_t id = 0;
+  double x = 0.0, y = 0.0;
+  friend bool operator==(const TruthLandmark&, const TruthLandmark&) = default;
+};
+
+struct Log {
+  LogHeader header;
+  std::vector<Event> events;                      // time order (non-decreasing)
+  std::vector<engine::Observation> observations;  // of all scans; id -1 = no id
+  std::vector<TruthLandmark> landmarks;           // ids unique
+  friend bool operator==(const Log& a, const Log& b);
+};
+
+// Reads a log file. Throws std::runtime_error naming the file, the line and the reason.
+Log read_log(const std::string& path);
+// The same from a stream; `name` stands for the file in messages.
+Log read_log(std::istream& in, const std::string& name);
+
+// Writes `log` to `path` (throws std::runtime_error when the file cannot be written) or to a
+// stream. Throws std::invalid_argument (writing nothing to a path) when the log would not read
+// back: events out of time order, a scan's observations out of bounds, a non-finite value.
+void write_log(const std::string& path, const Log& log);
+void write_log(std::ostream& out, const Log& log);
+
+// Streams a log out record by record, for sources too long to hold (a simulation of millions
+// of steps). The header is written by the constructor; records must come in time order, which
+// is checked (std::invalid_argument), as are the values.
+class LogWriter {
+ public:
+  LogWriter(std::ostream& out, const LogHeader& header);
+  void landmark(const TruthLandmark& landmark);
+  void control(double time, double dt, const engine::Control& control);
+  void scan(double time, std::span<const engine::Observation> observations);
+  void truth_pose(double time, double x, double y, double theta);
+  void gps(double time, double x, double y);
+  // Writes one event of `log` (a scan takes its observations from `log`).
+  void event(const Log& log, const Event& event);
+
+ private:
+  void stamp(double time);
+  std::ostream& out_;
+  double last_time_;
+  std::string line_;
+};
+
+}  // namespace fastslam::tools

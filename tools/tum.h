@@ -1,0 +1,27 @@
+// Trajectories in the TUM RGB-D format ("timestamp tx ty tz qx qy qz qw" per line), which the
+// usual trajectory evaluation tools read (evo, the TUM benchmark scripts): a planar pose is
+// written with z = 0 and the rotation by `yaw` about +z as a unit quaternion.
+//
+// Ownership: borrows its inputs for the call. Thread safety: thread-safe (no shared state).
+// Costs: O(poses); every double is printed in its shortest exact form (std::to_chars).
+#pragma once
+
+#include <array>
+#include <iosfwd>
+#include <span>
+
+namespace fastslam::tools {
+
+struct StampedPose {
+  double time = 0.0;  // s
+  double x = 0.0, y = 0.0, theta = 0.0;
+};
+
+// (qx, qy, qz, qw) of the rotation by `yaw` radians about +z: (0, 0, sin(yaw/2), cos(yaw/2)).
+std::array<double, 4> yaw_quaternion(double yaw);
+
+// One comment line naming the columns, then one line per pose. Throws std::invalid_argument on
+// a non-finite value (writing nothing).
+void write_tum(std::ostream& out, std::span<const StampedPose> poses);
+
+}  // namespace fastslam::tools
