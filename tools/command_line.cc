@@ -49,7 +49,7 @@ void add_config_option(CLI::App& cmd, RunWords& w) {
 void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   engine::FilterConfig& f = o.filter;
   cmd.add_option("--source", o.source, "where events come from: a simulated world or a native log")
-      ->check(CLI::IsMember({"sim", "log"}))
+      ->check(CLI::IsMember({"sim", "log", "victoria-park"}))
       ->capture_default_str();
   cmd.add_option("--data", o.data, "with --source log: the log file (docs/log-format.md)");
   add_world_options(cmd, o, w);

@@ -277,7 +277,19 @@ Source open_source(const RunOptions& o) {
     s.name = o.data;
     return s;
   }
-  throw std::invalid_argument("--source '" + o.source + "' is not supported (sim or log)");
+  if (o.source == "victoria-park") {
+    if (o.data.empty()) {
+      throw std::invalid_argument("--source victoria-park needs --data DIR (../shared/data/victoria_park)");
+    }
+    s.log = std::make_unique<Log>(read_victoria_park(o.data).log);
+    s.header = s.log->header;
+    s.events = std::make_unique<LogSource>(*s.log);
+    for (const Event& e : s.log->events) s.expected_controls += e.kind == EventKind::kControl;
+    s.name = o.data;
+    return s;
+  }
+  throw std::invalid_argument("--source '" + o.source +
+                              "' is not supported (sim, log or victoria-park)");
 }
 
 void write_poses_csv(std::ofstream& file, const std::vector<StampedPose>& poses) {
