@@ -1,7 +1,8 @@
-// Everything a `Filter` is built from: the algorithm, the particle count, the association mode,
-// the motion and sensor models with their noises, the existence (log-odds) parameters, the
-// resampling policy, the seed and the threads. One plain struct, validated once by
-// `validate(config)`, which names the first field that is wrong.
+// Everything a `Filter` (or the EKF-SLAM baseline, engine/ekf_slam.h) is built from: the
+// algorithm, the particle count, the association mode, the motion and sensor models with their
+// noises, the existence (log-odds) parameters, the resampling policy, the EKF's gates, the seed
+// and the threads. One plain struct, validated once by `validate(config)`, which names the first
+// field that is wrong.
 //
 // Thread safety: value types. Costs: validation is O(1).
 #pragma once
@@ -17,11 +18,15 @@
 
 namespace fastslam::engine {
 
-enum class Algorithm : std::uint8_t { kFastSlam1, kFastSlam2 };
+enum class Algorithm : std::uint8_t {
+  kFastSlam1,
+  kFastSlam2,
+  kEkf,  // EKF-SLAM over the pose and every landmark: engine/ekf_slam.h, not `Filter`
+};
 enum class Association : std::uint8_t {
-  kKnown,  // observations carry the landmark id (simulations, ground-truth tests)
-  kMaximumLikelihood,          // eq. 64 (unknown association issue)
-  kDataAssociationSampling,    // eq. 65 (unknown association issue)
+  kKnown,                    // observations carry the landmark id (simulations, ground-truth tests)
+  kMaximumLikelihood,        // eq. 64 (unknown association issue)
+  kDataAssociationSampling,  // eq. 65 (unknown association issue)
 };
 enum class MotionKind : std::uint8_t {
   kBaileyCar,     // control (V, G): speed and steering from the heading; Bailey's simulator
@@ -32,8 +37,8 @@ enum class MotionKind : std::uint8_t {
 
 struct MotionConfig {
   MotionKind kind = MotionKind::kBaileyCar;
-  double wheelbase = 4.0;           // kBaileyCar
-  VictoriaParkGeometry geometry;    // kVictoriaPark
+  double wheelbase = 4.0;         // kBaileyCar
+  VictoriaParkGeometry geometry;  // kVictoriaPark
   // Standard deviations of the control noise (per control component: speed m/s and steering
   // rad for the cars, v and omega for the unicycle; for kBrownian the per-step increments of v
   // and omega, eq. 80).
@@ -41,11 +46,11 @@ struct MotionConfig {
 };
 
 struct SensorConfig {
-  double sigma_range = 0.1;                              // m
-  double sigma_bearing = 1.0 * std::numbers::pi / 180;   // rad
-  SensorOffset offset;                                   // sensor pose on the vehicle
-  double max_range = 30.0;                               // perceptual range (negative information)
-  double field_of_view = std::numbers::pi;               // rad, centred on the sensor's heading
+  double sigma_range = 0.1;                             // m
+  double sigma_bearing = 1.0 * std::numbers::pi / 180;  // rad
+  SensorOffset offset;                                  // sensor pose on the vehicle
+  double max_range = 30.0;                              // perceptual range (negative information)
+  double field_of_view = std::numbers::pi;              // rad, centred on the sensor's heading
 };
 
 // Existence log-odds (eq. 73-75); the defaults are table 1's counter form.
@@ -54,6 +59,16 @@ struct ExistenceConfig {
   double seen = 1.0;          // l+ added when associated
   double missed = 1.0;        // l- subtracted when in view and not associated
   double remove_below = 0.0;  // removed when the log-odds fall below this
+};
+
+// EKF-SLAM (Algorithm::kEkf) with maximum-likelihood association: gates on the squared
+// Mahalanobis distance d2 = v^T S^-1 v of an observation to a landmark (chi-square with 2 degrees
+// of freedom when the association is right). An observation takes the nearest landmark (smallest
+// d2) if d2 < gate_accept, becomes a new landmark if d2 > gate_new for every landmark, and is
+// dropped in between (ambiguous). REQUIRES: 0 < gate_accept <= gate_new.
+struct EkfConfig {
+  double gate_accept = 5.991;  // chi2(2) 95% quantile
+  double gate_new = 13.816;    // chi2(2) 99.9% quantile
 };
 
 struct FilterConfig {
@@ -68,11 +83,12 @@ struct FilterConfig {
   parallel::ResamplePolicy resample{parallel::ResamplePolicy::When::kEssBelowFraction, 0.75,
                                     parallel::ResampleScheme::kSystematic};
   std::uint64_t seed = 1;
-  unsigned threads = 0;      // 0: every core
-  std::size_t grain = 16;    // particles per parallel task
+  unsigned threads = 0;    // 0: every core
+  std::size_t grain = 16;  // particles per parallel task
   // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
   // store per particle per control and a reduction per control).
   bool record_trajectory = false;
+  EkfConfig ekf;  // Algorithm::kEkf only
   // The initial pose of every particle (x, y, theta; v, omega for kBrownian).
   double initial_pose[5] = {0, 0, 0, 0, 0};
 };
