@@ -49,14 +49,23 @@ void add_run_options(CLI::App& cmd, fastslam::tools::RunOptions& o, Words& w) {
       ->capture_default_str();
   cmd.add_option("--loops", w.loops, "times the route is driven (default: 2 for CSV worlds, 1 else)")
       ->check(CLI::Range(1, 1000));
-  cmd.add_option("--algorithm", w.algorithm, "FastSLAM version")
-      ->check(CLI::IsMember({"fastslam1", "fastslam2"}))
+  cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
+      ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
       ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(CLI::Range(1U, 100'000'000U))
       ->capture_default_str();
-  cmd.add_option("--association", w.association, "data association (ids from the simulator)")
-      ->check(CLI::IsMember({"known"}))
+  cmd.add_option("--association", w.association,
+                 "data association: known (ids from the simulator) or ml (ekf only so far)")
+      ->check(CLI::IsMember({"known", "ml"}))
+      ->capture_default_str();
+  cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
+                 "ekf with ml: associate when the squared Mahalanobis distance is below this")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--ekf-gate-new", f.ekf.gate_new,
+                 "ekf with ml: a new landmark when every squared Mahalanobis distance exceeds it")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
       ->capture_default_str();
@@ -115,9 +124,11 @@ int main(int argc, char** argv) {
     if (run_cmd->parsed()) {
       const bool csv = !run.landmarks_csv.empty();
       run.sim.loops = words.loops > 0 ? words.loops : (csv ? 2 : 1);
-      run.filter.algorithm =
-          words.algorithm == "fastslam2" ? Algorithm::kFastSlam2 : Algorithm::kFastSlam1;
-      run.filter.association = Association::kKnown;
+      run.filter.algorithm = words.algorithm == "ekf"         ? Algorithm::kEkf
+                             : words.algorithm == "fastslam2" ? Algorithm::kFastSlam2
+                                                              : Algorithm::kFastSlam1;
+      run.filter.association =
+          words.association == "ml" ? Association::kMaximumLikelihood : Association::kKnown;
       run.filter.resample.when = words.resample == "every"
                                      ? ResamplePolicy::When::kEveryStep
                                      : ResamplePolicy::When::kEssBelowFraction;

@@ -1,8 +1,5 @@
 #include "tools/run_command.h"
 
-#include <sys/resource.h>
-#include <unistd.h>
-
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -10,11 +7,14 @@
 #include <fstream>
 #include <memory>
 #include <stdexcept>
+#include <sys/resource.h>
+#include <unistd.h>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 #include <oneapi/tbb/info.h>
 
+#include "engine/ekf_slam.h"
 #include "engine/filter.h"
 
 namespace fastslam::tools {
@@ -70,6 +70,58 @@ class Progress {
   Clock::time_point last_{};
 };
 
+// What one run of an estimator through the simulator produced.
+struct Drive {
+  std::vector<TruePose> truth;
+  std::vector<double> times;
+  engine::Estimate estimate;
+  std::vector<engine::TrajectoryPoint> trajectory;
+  engine::FilterStatistics stats;
+  double sim_seconds = 0.0;
+  double filter_seconds = 0.0;
+};
+
+// The simulation loop, the same for the FastSLAM `Filter` and `EkfSlam` (same method names).
+template <class Estimator>
+Drive drive(Estimator&& filter, Simulator& sim, Progress& progress, double expected_steps) {
+  Drive out;
+  std::vector<engine::Observation> scan;
+  SimStep step;
+  double t = 0.0;
+  std::uint64_t scans = 0;
+  for (;;) {
+    const auto t0 = Clock::now();
+    if (!sim.next(step)) break;
+    const auto t1 = Clock::now();
+    t += step.dt;
+    out.truth.push_back(step.truth);
+    out.times.push_back(t);
+    filter.predict({step.speed, step.steer}, step.dt);
+    if (step.has_scan) {
+      scan.clear();
+      for (const SimObservation& z : step.scan) {
+        scan.push_back({z.range, z.bearing, static_cast<std::int64_t>(z.landmark)});
+      }
+      filter.observe(scan);
+      ++scans;
+      if (scans % 64 == 0) {
+        progress.update(std::min(1.0, double(out.truth.size()) / expected_steps), scans,
+                        filter.statistics().observations);
+      }
+    }
+    out.sim_seconds += std::chrono::duration<double>(t1 - t0).count();
+    out.filter_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
+  }
+  const auto t_end = Clock::now();
+  out.estimate = filter.estimate();
+  out.trajectory = filter.take_trajectory();
+  out.filter_seconds += std::chrono::duration<double>(Clock::now() - t_end).count();
+  out.stats = filter.statistics();
+  progress.update(1.0, scans, out.stats.observations);
+  progress.finish();
+  return out;
+}
+
 }  // namespace
 
 int run_simulation(const RunOptions& options) {
@@ -102,45 +154,16 @@ int run_simulation(const RunOptions& options) {
       std::max(1.0, route * options.sim.loops / (options.sim.speed * options.sim.dt));
 
   Simulator sim(world, options.sim, config.seed);
-  engine::Filter filter(config);
   Progress progress(options.progress);
-  std::vector<TruePose> truth;
-  std::vector<double> times;
-  std::vector<engine::Observation> scan;
-  SimStep step;
-  double sim_seconds = 0.0;
-  double filter_seconds = 0.0;
-  double t = 0.0;
-  std::uint64_t scans = 0;
-  for (;;) {
-    const auto t0 = Clock::now();
-    if (!sim.next(step)) break;
-    const auto t1 = Clock::now();
-    t += step.dt;
-    truth.push_back(step.truth);
-    times.push_back(t);
-    filter.predict({step.speed, step.steer}, step.dt);
-    if (step.has_scan) {
-      scan.clear();
-      for (const SimObservation& z : step.scan) {
-        scan.push_back({z.range, z.bearing, static_cast<std::int64_t>(z.landmark)});
-      }
-      filter.observe(scan);
-      ++scans;
-      if (scans % 64 == 0) {
-        progress.update(std::min(1.0, double(truth.size()) / expected_steps), scans,
-                        filter.statistics().observations);
-      }
-    }
-    sim_seconds += std::chrono::duration<double>(t1 - t0).count();
-    filter_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
-  }
-  const auto t_end = Clock::now();
-  const engine::Estimate estimate = filter.estimate();
-  const std::vector<engine::TrajectoryPoint> trajectory = filter.take_trajectory();
-  filter_seconds += std::chrono::duration<double>(Clock::now() - t_end).count();
-  progress.update(1.0, scans, filter.statistics().observations);
-  progress.finish();
+  const Drive run = config.algorithm == engine::Algorithm::kEkf
+                        ? drive(engine::EkfSlam(config), sim, progress, expected_steps)
+                        : drive(engine::Filter(config), sim, progress, expected_steps);
+  const std::vector<TruePose>& truth = run.truth;
+  const std::vector<double>& times = run.times;
+  const engine::Estimate& estimate = run.estimate;
+  const std::vector<engine::TrajectoryPoint>& trajectory = run.trajectory;
+  const double sim_seconds = run.sim_seconds;
+  const double filter_seconds = run.filter_seconds;
 
   double pose_se = 0.0;
   for (const engine::TrajectoryPoint& p : trajectory) {
@@ -148,21 +171,28 @@ int run_simulation(const RunOptions& options) {
     pose_se += (p.x - s.x) * (p.x - s.x) + (p.y - s.y) * (p.y - s.y);
   }
   const double pose_rmse = trajectory.empty() ? 0.0 : std::sqrt(pose_se / trajectory.size());
+  // Each estimate against its true landmark: by id with known association, else the nearest.
   double landmark_se = 0.0;
+  const bool known_ids = config.association == engine::Association::kKnown;
+  const std::unique_ptr<TruthIndex> true_index =
+      known_ids || world.landmarks.empty() ? nullptr
+                                           : std::make_unique<TruthIndex>(world.landmarks);
   for (const engine::MapLandmark& l : estimate.map) {
-    const Point& p = world.landmarks.at(l.id);
+    const Point& p = world.landmarks.at(known_ids ? l.id : true_index->nearest(l.x, l.y).first);
     landmark_se += (l.x - p.x) * (l.x - p.x) + (l.y - p.y) * (l.y - p.y);
   }
   const double landmark_rmse =
       estimate.map.empty() ? 0.0 : std::sqrt(landmark_se / estimate.map.size());
-  const engine::FilterStatistics stats = filter.statistics();
+  const engine::FilterStatistics& stats = run.stats;
+  const std::uint32_t particles =
+      config.algorithm == engine::Algorithm::kEkf ? 1 : config.particles;
   const TruePose& last = truth.back();
 
   nlohmann::json metrics = {
       {"source", options.source},
       {"world", options.landmarks_csv.empty() ? options.world : options.landmarks_csv},
       {"algorithm", engine::to_string(config.algorithm)},
-      {"particles", config.particles},
+      {"particles", particles},
       {"association", engine::to_string(config.association)},
       {"seed", config.seed},
       {"threads", config.threads > 0 ? config.threads : unsigned(tbb::info::default_concurrency())},
@@ -187,7 +217,7 @@ int run_simulation(const RunOptions& options) {
        std::hypot(estimate.mean_pose[0] - last.x, estimate.mean_pose[1] - last.y)},
   };
   std::printf("%s, M = %u, %s association, seed %llu: %llu steps, %llu scans, %zu landmarks\n",
-              std::string(engine::to_string(config.algorithm)).c_str(), config.particles,
+              std::string(engine::to_string(config.algorithm)).c_str(), particles,
               std::string(engine::to_string(config.association)).c_str(),
               static_cast<unsigned long long>(config.seed),
               static_cast<unsigned long long>(stats.controls),

@@ -1,10 +1,10 @@
 // `fastslam run`: a simulated world (Bailey's CSV maps, or a procedural grid or loop of any
-// size) driven through the Filter, with the metrics, the estimated trajectory and the final
-// map written to an output directory.
+// size) driven through the Filter (or the EKF-SLAM baseline, engine::EkfSlam, for algorithm ekf),
+// with the metrics, the estimated trajectory and the final map written to an output directory.
 //
 // Ownership: plain options in; files out. Thread safety: one run per call; the filter runs its
 // own threads. Costs: the simulation plus the filter, O(steps x particles) and O(scans x
-// particles x observations x log N).
+// particles x observations x log N); for the EKF O(scans x observations x N^2).
 #pragma once
 
 #include <cstdint>
