@@ -31,12 +31,64 @@ double seconds_between(Clock::time_point a, Clock::time_point b) {
 
 int pose_dim_of(MotionKind kind) { return kind == MotionKind::kBrownian ? 5 : 3; }
 
-// A candidate pairing of observation `obs` with landmark `landmark` (ML association).
+constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
+
+// A candidate pairing of observation `obs` with landmark `landmark` (ML association), with the
+// linearisation and innovation it was scored with.
 struct Candidate {
   double d2 = 0.0;
   std::size_t obs = 0;
   std::size_t landmark = 0;
+  MeasurementLinearization<3> lin;
+  Eigen::Vector2d v;
 };
+
+// v^T C^-1 v for a small symmetric positive definite C, by a plain Cholesky factorisation
+// (C = L L^T, then |L^-1 v|^2); infinity when C is not positive definite. Plain loops: the sizes
+// are tiny, and GCC 12 misreports Eigen's AVX-512 kernels for dynamic factorisations.
+double quadratic_form_spd(Eigen::MatrixXd& c, const Eigen::VectorXd& v) {
+  const Eigen::Index m = c.rows();
+  for (Eigen::Index j = 0; j < m; ++j) {
+    double diag = c(j, j);
+    for (Eigen::Index k = 0; k < j; ++k) diag -= c(j, k) * c(j, k);
+    if (!(diag > 0) || !std::isfinite(diag)) return std::numeric_limits<double>::infinity();
+    c(j, j) = std::sqrt(diag);
+    for (Eigen::Index i = j + 1; i < m; ++i) {
+      double sum = c(i, j);
+      for (Eigen::Index k = 0; k < j; ++k) sum -= c(i, k) * c(j, k);
+      c(i, j) = sum / c(j, j);
+    }
+  }
+  double quad = 0.0;
+  std::vector<double> y(static_cast<std::size_t>(m));
+  for (Eigen::Index i = 0; i < m; ++i) {
+    double sum = v[i];
+    for (Eigen::Index k = 0; k < i; ++k) sum -= c(i, k) * y[static_cast<std::size_t>(k)];
+    y[static_cast<std::size_t>(i)] = sum / c(i, i);
+    quad += y[static_cast<std::size_t>(i)] * y[static_cast<std::size_t>(i)];
+  }
+  return quad;
+}
+
+// The chi-square quantile with 2k degrees of freedom at probability q, by bisection on the
+// closed-form CDF of even degrees: 1 - exp(-x/2) sum_{i<k} (x/2)^i / i!.
+double chi2_quantile_even(int k, double q) {
+  auto cdf = [k](double x) {
+    double term = 1.0, sum = 1.0;
+    for (int i = 1; i < k; ++i) {
+      term *= 0.5 * x / i;
+      sum += term;
+    }
+    return 1.0 - std::exp(-0.5 * x) * sum;
+  };
+  double lo = 0.0, hi = 1.0;
+  while (cdf(hi) < q) hi *= 2;
+  for (int it = 0; it < 100; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (cdf(mid) < q ? lo : hi) = mid;
+  }
+  return hi;
+}
 
 }  // namespace
 
@@ -265,6 +317,89 @@ struct EkfSlam::Impl {
     }
   }
 
+  // Joint compatibility branch and bound (Neira and Tardos 2001) over the individually
+  // compatible candidates: the hypothesis with the most pairings whose joint squared Mahalanobis
+  // distance (all pairs' innovations together, with their correlations) is below the chi-square
+  // quantile of 2k degrees of freedom at the confidence of gate_accept; ties go to the smaller
+  // distance. The search stops after kJcbbNodeBudget hypotheses and keeps the best so far.
+  static constexpr std::size_t kJcbbNodeBudget = 100'000;
+
+  std::vector<std::size_t> jcbb(const std::vector<Candidate>& accepted, std::size_t z,
+                                const Eigen::Matrix3d& pss) const {
+    std::vector<std::vector<const Candidate*>> options(z);
+    for (const Candidate& c : accepted) options[c.obs].push_back(&c);
+    // 2-dof confidence of the individual gate, then the quantile per hypothesis size.
+    const double confidence = 1.0 - std::exp(-0.5 * config.ekf.gate_accept);
+    std::vector<double> gate(z + 1, 0.0);
+    for (std::size_t k = 1; k <= z; ++k) {
+      gate[k] = chi2_quantile_even(static_cast<int>(k), confidence);
+    }
+    std::vector<const Candidate*> pairs;
+    std::vector<std::size_t> best(z, kNone), current(z, kNone);
+    std::size_t best_pairs = 0;
+    double best_d2 = 0.0;
+    std::size_t nodes = 0;
+    std::vector<bool> taken(landmarks(), false);
+    // The joint distance of `pairs`: C_ab = H_a P H_b^T (+ R on the diagonal), from the blocks.
+    auto joint_d2 = [&]() {
+      const auto k = static_cast<Index>(pairs.size());
+      Eigen::MatrixXd c(2 * k, 2 * k);
+      Eigen::VectorXd v(2 * k);
+      for (Index a = 0; a < k; ++a) {
+        const Candidate& ca = *pairs[a];
+        const Index la = offset_of(ca.landmark);
+        v.segment<2>(2 * a) = ca.v;
+        for (Index b = 0; b <= a; ++b) {
+          const Candidate& cb = *pairs[b];
+          const Index lb = offset_of(cb.landmark);
+          // P_{ma,mb} from the lower triangle (la > lb: a below b; equal: the diagonal block).
+          const Eigen::Matrix2d pmm =
+              la == lb  ? Eigen::Matrix2d(p.block<2, 2>(la, la).selfadjointView<Eigen::Lower>())
+              : la > lb ? Eigen::Matrix2d(p.block<2, 2>(la, lb))
+                        : Eigen::Matrix2d(p.block<2, 2>(lb, la).transpose());
+          const Eigen::Matrix<double, 2, 3> pas = p.block<2, 3>(la, 0);
+          const Eigen::Matrix<double, 2, 3> pbs = p.block<2, 3>(lb, 0);
+          Eigen::Matrix2d block = ca.lin.g_pose * pss * cb.lin.g_pose.transpose() +
+                                  ca.lin.g_pose * pbs.transpose() * cb.lin.g_landmark.transpose() +
+                                  ca.lin.g_landmark * pas * cb.lin.g_pose.transpose() +
+                                  ca.lin.g_landmark * pmm * cb.lin.g_landmark.transpose();
+          if (a == b) block += r;
+          c.block<2, 2>(2 * a, 2 * b) = block;
+          c.block<2, 2>(2 * b, 2 * a) = block.transpose();
+        }
+      }
+      return quadratic_form_spd(c, v);
+    };
+    auto search = [&](auto&& self, std::size_t j, double d2) -> void {
+      if (++nodes > kJcbbNodeBudget) return;
+      if (j == z) {
+        if (pairs.size() > best_pairs || (pairs.size() == best_pairs && d2 < best_d2)) {
+          best = current;
+          best_pairs = pairs.size();
+          best_d2 = d2;
+        }
+        return;
+      }
+      for (const Candidate* c : options[j]) {
+        if (taken[c->landmark]) continue;
+        pairs.push_back(c);
+        const double joint = joint_d2();
+        if (joint < gate[pairs.size()]) {
+          taken[c->landmark] = true;
+          current[j] = c->landmark;
+          self(self, j + 1, joint);
+          current[j] = kNone;
+          taken[c->landmark] = false;
+        }
+        pairs.pop_back();
+      }
+      // Leave j unpaired only if that can still beat the best.
+      if (pairs.size() + (z - j - 1) >= best_pairs) self(self, j + 1, d2);
+    };
+    search(search, 0, 0.0);
+    return best;
+  }
+
   void observe_ml(std::span<const Observation> scan) {
     // Score every (observation, landmark) pair at the state before the scan.
     const std::size_t count = landmarks();
@@ -277,21 +412,27 @@ struct EkfSlam::Impl {
       for (std::size_t i = 0; i < count; ++i) {
         if (!score(i, pss, z, scored)) continue;
         nearest[j] = std::min(nearest[j], scored.d2);
-        if (scored.d2 < config.ekf.gate_accept) accepted.push_back({scored.d2, j, i});
+        if (scored.d2 < config.ekf.gate_accept) {
+          accepted.push_back({scored.d2, j, i, scored.lin, scored.v});
+        }
       }
     }
-    // Greedy mutual exclusion: the closest pairs first, each observation and landmark once.
+    // The closest pairs first (greedy order; JCBB tries each observation's candidates in it).
     std::sort(accepted.begin(), accepted.end(), [](const Candidate& a, const Candidate& b) {
       if (a.d2 != b.d2) return a.d2 < b.d2;
       return a.obs != b.obs ? a.obs < b.obs : a.landmark < b.landmark;
     });
-    constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
     std::vector<std::size_t> match(scan.size(), kNone);
-    std::vector<bool> taken(count, false);
-    for (const Candidate& c : accepted) {
-      if (match[c.obs] != kNone || taken[c.landmark]) continue;
-      match[c.obs] = c.landmark;
-      taken[c.landmark] = true;
+    if (config.ekf.joint_compatibility) {
+      match = jcbb(accepted, scan.size(), pss);
+    } else {
+      // Greedy mutual exclusion: each observation and landmark once.
+      std::vector<bool> taken(count, false);
+      for (const Candidate& c : accepted) {
+        if (match[c.obs] != kNone || taken[c.landmark]) continue;
+        match[c.obs] = c.landmark;
+        taken[c.landmark] = true;
+      }
     }
     std::size_t fresh = 0;
     for (std::size_t j = 0; j < scan.size(); ++j) {

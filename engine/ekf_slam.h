@@ -21,8 +21,12 @@
 // before the scan): each observation takes the landmark of smallest d2 if d2 < ekf.gate_accept,
 // pairs being taken greedily by increasing d2 so that no landmark is used twice in one scan
 // (mutual exclusion); an observation with d2 > ekf.gate_new for every landmark starts a new
-// landmark, and one in between is dropped. kDataAssociationSampling is refused (it needs
-// particles). Landmarks are never removed (the EKF keeps no existence estimate).
+// landmark, and one in between is dropped. With ekf.joint_compatibility the greedy choice is
+// replaced by joint compatibility branch and bound (JCBB, Neira and Tardos 2001): the largest set
+// of pairs whose innovations are jointly compatible (their joint d2 below the chi-square quantile
+// of 2k degrees of freedom at the accept gate's confidence), searched over the individually
+// compatible pairs, at most 10^5 hypotheses per scan. kDataAssociationSampling is refused (it
+// needs particles). Landmarks are never removed (the EKF keeps no existence estimate).
 //
 // The covariance is stored as the lower triangle of a dense matrix (the upper triangle is not
 // kept up to date), so it is exactly symmetric by construction; `covariance()` returns the full
@@ -39,7 +43,8 @@
 // but the trajectory; `observe` O(n^2) per associated observation (the rank-2 covariance update:
 // about n^2 flops and one pass over n^2 / 2 doubles), plus O(N) per new landmark (amortised:
 // the covariance grows by 1.25x when full, an O(n^2) copy) and, for ML association,
-// O(Z N log(Z N)) to score and sort the candidate pairs of a scan of Z observations; `estimate`
+// O(Z N log(Z N)) to score and sort the candidate pairs of a scan of Z observations (JCBB:
+// exponential in Z in the worst case, bounded by its hypothesis budget, O(k^3) each); `estimate`
 // O(N); memory 8 n^2 bytes (about 32 MB at N = 1000, 128 MB at N = 2000).
 #pragma once
 

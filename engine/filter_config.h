@@ -24,9 +24,9 @@ enum class Algorithm : std::uint8_t {
   kEkf,  // EKF-SLAM over the pose and every landmark: engine/ekf_slam.h, not `Filter`
 };
 enum class Association : std::uint8_t {
-  kKnown,                    // observations carry the landmark id (simulations, ground-truth tests)
-  kMaximumLikelihood,        // eq. 64 (unknown association issue)
-  kDataAssociationSampling,  // eq. 65 (unknown association issue)
+  kKnown,  // observations carry the landmark id (simulations, ground-truth tests)
+  kMaximumLikelihood,          // eq. 64 (unknown association issue)
+  kDataAssociationSampling,    // eq. 65 (unknown association issue)
 };
 enum class MotionKind : std::uint8_t {
   kBaileyCar,     // control (V, G): speed and steering from the heading; Bailey's simulator
@@ -37,8 +37,8 @@ enum class MotionKind : std::uint8_t {
 
 struct MotionConfig {
   MotionKind kind = MotionKind::kBaileyCar;
-  double wheelbase = 4.0;         // kBaileyCar
-  VictoriaParkGeometry geometry;  // kVictoriaPark
+  double wheelbase = 4.0;           // kBaileyCar
+  VictoriaParkGeometry geometry;    // kVictoriaPark
   // Standard deviations of the control noise (per control component: speed m/s and steering
   // rad for the cars, v and omega for the unicycle; for kBrownian the per-step increments of v
   // and omega, eq. 80).
@@ -46,11 +46,11 @@ struct MotionConfig {
 };
 
 struct SensorConfig {
-  double sigma_range = 0.1;                             // m
-  double sigma_bearing = 1.0 * std::numbers::pi / 180;  // rad
-  SensorOffset offset;                                  // sensor pose on the vehicle
-  double max_range = 30.0;                              // perceptual range (negative information)
-  double field_of_view = std::numbers::pi;              // rad, centred on the sensor's heading
+  double sigma_range = 0.1;                              // m
+  double sigma_bearing = 1.0 * std::numbers::pi / 180;   // rad
+  SensorOffset offset;                                   // sensor pose on the vehicle
+  double max_range = 30.0;                               // perceptual range (negative information)
+  double field_of_view = std::numbers::pi;               // rad, centred on the sensor's heading
 };
 
 // Existence log-odds (eq. 73-75); the defaults are table 1's counter form.
@@ -69,6 +69,9 @@ struct ExistenceConfig {
 struct EkfConfig {
   double gate_accept = 5.991;  // chi2(2) 95% quantile
   double gate_new = 13.816;    // chi2(2) 99.9% quantile
+  // Joint compatibility branch and bound (Neira and Tardos 2001) instead of the greedy nearest
+  // neighbour: the largest set of pairings that is jointly compatible at gate_accept's confidence.
+  bool joint_compatibility = false;
 };
 
 struct FilterConfig {

@@ -67,6 +67,8 @@ void add_run_options(CLI::App& cmd, fastslam::tools::RunOptions& o, Words& w) {
                  "ekf with ml: a new landmark when every squared Mahalanobis distance exceeds it")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
+               "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
   cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
       ->capture_default_str();
   cmd.add_option("--threads", f.threads, "worker threads (0: all cores)")

@@ -612,6 +612,63 @@ TEST(EkfSlamAssociationTest, GatesAndMutualExclusion) {
   for (std::size_t i = 0; i < e.map.size(); ++i) EXPECT_EQ(e.map[i].id, i);
 }
 
+// Two landmarks on one ray, 10 and 11 m ahead, mapped while the pose was exact; then the pose
+// becomes uncertain along x (sd 1 m) and the vehicle, truly 1 m further back, sees them at 11
+// and 12 m. Individually, "11 m" fits the 11 m landmark best (d2 0) and "12 m" still fits the
+// 10 m one (d2 about 3.9 < 5.99): the greedy nearest neighbour crosses the pairs. Jointly, the
+// two innovations (0, 2) disagree about the pose shift, while (1, 1) agree: JCBB pairs them
+// right, keeps the map and moves the pose back by 1 m.
+TEST(EkfSlamAssociationTest, JointCompatibilityUntanglesWhatGreedyCrosses) {
+  for (const bool joint : {false, true}) {
+    SCOPED_TRACE(joint ? "JCBB" : "greedy");
+    FilterConfig config = ekf_config(Association::kMaximumLikelihood);
+    config.motion.kind = MotionKind::kUnicycle;
+    config.motion.sigma_control[0] = 1.0;
+    config.motion.sigma_control[1] = 0.0;
+    config.ekf.joint_compatibility = joint;
+    EkfSlam ekf(config);
+    ekf.observe(std::vector<Observation>{{10.0, 0.0, -1}, {11.0, 0.0, -1}});
+    ekf.predict({0.0, 0.0}, 1.0);
+    ASSERT_NEAR(ekf.covariance()(0, 0), 1.0, 1e-12);
+    ekf.observe(std::vector<Observation>{{11.0, 0.0, -1}, {12.0, 0.0, -1}});
+    EXPECT_EQ(ekf.association_counts().updated, 2u);
+    EXPECT_EQ(ekf.landmark_count(), 2u);
+    const Eigen::VectorXd x = ekf.mean();
+    std::cout << (joint ? "JCBB" : "greedy") << ": pose x " << x[0] << ", landmarks at " << x[3]
+              << ", " << x[5] << " m\n";
+    if (joint) {
+      EXPECT_NEAR(x[0], -1.0, 0.05);
+      EXPECT_NEAR(x[3], 10.0, 0.05);
+      EXPECT_NEAR(x[5], 11.0, 0.05);
+    } else {
+      // The crossed pairs tear the map: the two landmarks, 1 m apart, are pulled together
+      // (measured: both at 10.5 m).
+      EXPECT_LT(std::abs(x[5] - x[3]), 0.5);
+    }
+  }
+}
+
+// The same map, seen at 11 and 9 m: no pairing of both is jointly compatible ((0, -1) and
+// (1, -2) disagree about the shift), so JCBB keeps one pair and drops the other observation,
+// where greedy updates with both.
+TEST(EkfSlamAssociationTest, JointCompatibilityRefusesIncompatiblePairs) {
+  for (const bool joint : {false, true}) {
+    SCOPED_TRACE(joint ? "JCBB" : "greedy");
+    FilterConfig config = ekf_config(Association::kMaximumLikelihood);
+    config.motion.kind = MotionKind::kUnicycle;
+    config.motion.sigma_control[0] = 1.0;
+    config.motion.sigma_control[1] = 0.0;
+    config.ekf.joint_compatibility = joint;
+    EkfSlam ekf(config);
+    ekf.observe(std::vector<Observation>{{10.0, 0.0, -1}, {11.0, 0.0, -1}});
+    ekf.predict({0.0, 0.0}, 1.0);
+    ekf.observe(std::vector<Observation>{{11.0, 0.0, -1}, {9.0, 0.0, -1}});
+    EXPECT_EQ(ekf.association_counts().updated, joint ? 1u : 2u);
+    EXPECT_EQ(ekf.association_counts().dropped, joint ? 1u : 0u);
+    EXPECT_EQ(ekf.landmark_count(), 2u);
+  }
+}
+
 struct MapScore {
   std::size_t landmarks = 0;
   std::size_t distinct_truths = 0;  // true landmarks that are some estimate's nearest
@@ -657,6 +714,20 @@ TEST(EkfSlamAssociationTest, MaximumLikelihoodRecoversTheLandmarksOfASimulatedLo
   feed(known, s.events);
   EkfSlam ml(ekf_config(Association::kMaximumLikelihood));
   feed(ml, s.events);
+  FilterConfig jcbb_config = ekf_config(Association::kMaximumLikelihood);
+  jcbb_config.ekf.joint_compatibility = true;
+  EkfSlam jcbb(jcbb_config);
+  feed(jcbb, s.events);
+  const MapScore j = score_map(jcbb, s);
+  const double pose_jcbb = pose_rmse(jcbb.take_trajectory(), s.truth);
+  std::cout << "loop, JCBB: " << j.landmarks << " landmarks (" << j.distinct_truths
+            << " distinct truths), RMSE " << j.rmse << " m, pose RMSE " << pose_jcbb << " m; "
+            << jcbb.association_counts().updated << " updated, "
+            << jcbb.association_counts().created << " created, "
+            << jcbb.association_counts().dropped << " dropped\n";
+  EXPECT_EQ(j.distinct_truths, seen.size());
+  EXPECT_LE(static_cast<double>(j.landmarks - seen.size()),
+            0.004 * static_cast<double>(jcbb.statistics().observations));
   const MapScore k = score_map(known, s);
   const MapScore m = score_map(ml, s);
   const double pose_known = pose_rmse(known.take_trajectory(), s.truth);
@@ -679,6 +750,7 @@ TEST(EkfSlamAssociationTest, MaximumLikelihoodRecoversTheLandmarksOfASimulatedLo
   EXPECT_EQ(c.updated + c.created + c.dropped, ml.statistics().observations);
   EXPECT_LT(m.rmse, 1.5 * k.rmse + 0.05);
   EXPECT_LT(pose_ml, 1.5 * pose_known + 0.05);
+  EXPECT_LT(pose_jcbb, 1.5 * pose_known + 0.05);
 }
 
 // ---- 7. Bailey's webmap, known ids ------------------------------------------------------------
