@@ -761,6 +761,11 @@ tools::World webmap(const std::string& shared) {
                                dir + "example_webmap_waypoints.csv");
 }
 
+// Measured (Release): pose RMSE over seeds 1..10 4.63 +- 1.49 m (max 7.3), landmark RMSE 3.2 m;
+// over seeds 1..30 4.54 +- 1.78 m (max 9.3). Bailey's MATLAB EKF scored 3.1 m on one seed. With
+// ML association (gating drops the 5% least consistent observations) seeds 1..5 score 1.9-3.4 m.
+// Mutations caught here: no cross-covariance at augmentation, no P_xm in the prediction, no
+// control noise, H without its pose columns.
 TEST(EkfSlamAccuracyTest, BaileyWebmapKnownAssociation) {
   FASTSLAM_REQUIRE_SHARED(shared);
   const tools::World world = webmap(shared);
@@ -792,7 +797,7 @@ TEST(EkfSlamAccuracyTest, BaileyWebmapKnownAssociation) {
             << std::sqrt(sd) << " m (max " << worst << "), landmark RMSE " << lm << " m\n";
   for (int i = 0; i < seeds; ++i) EXPECT_LT(pose[i], 15.0) << "seed " << i + 1;
   if (!kSanitized) {
-    EXPECT_LT(mean, 8.0);
+    EXPECT_LT(mean, 8.0);  // the mean of 10 seeds has a standard error of about 0.5 m
     EXPECT_GT(mean, 0.5) << "too good to be true (truth leaking?)";
   }
 }
