@@ -99,6 +99,11 @@ struct Filter::Impl {
 
   static const FilterConfig& checked(const FilterConfig& c) {
     validate(c);
+    if (c.algorithm == Algorithm::kEkf) {
+      throw std::invalid_argument(
+          "Filter: algorithm 'ekf' is the EKF-SLAM baseline; construct engine::EkfSlam "
+          "(engine/ekf_slam.h) instead");
+    }
     return c;
   }
 

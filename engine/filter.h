@@ -117,7 +117,7 @@ struct FilterStatistics {
 
 class Filter {
  public:
-  // Throws std::invalid_argument as validate(config).
+  // Throws std::invalid_argument as validate(config), and for Algorithm::kEkf (use EkfSlam).
   explicit Filter(const FilterConfig& config);
   ~Filter();
   Filter(const Filter&) = delete;

@@ -15,16 +15,30 @@ void require(bool ok, const std::string& what) {
 
 bool positive(double v) { return std::isfinite(v) && v > 0; }
 
+// The EKF-SLAM baseline: known or ML association (DAS samples an association per particle, which
+// a single Gaussian cannot), and usable gates.
+void validate_ekf(const FilterConfig& c) {
+  require(c.association == Association::kKnown || c.association == Association::kMaximumLikelihood,
+          std::string("association '") + std::string(to_string(c.association)) +
+              "' is not meaningful for the EKF (data association sampling needs particles); "
+              "use 'known' or 'ml'");
+  require(positive(c.ekf.gate_accept), "ekf.gate_accept must be finite and > 0");
+  require(std::isfinite(c.ekf.gate_new) && c.ekf.gate_new >= c.ekf.gate_accept,
+          "ekf.gate_new must be finite and >= ekf.gate_accept");
+}
+
 }  // namespace
 
 void validate(const FilterConfig& c) {
   require(c.particles >= 1, "particles must be at least 1 (got 0)");
-  require(c.algorithm == Algorithm::kFastSlam1 || c.algorithm == Algorithm::kFastSlam2,
+  require(c.algorithm == Algorithm::kFastSlam1 || c.algorithm == Algorithm::kFastSlam2 ||
+              c.algorithm == Algorithm::kEkf,
           "unknown algorithm");
   require(c.association == Association::kKnown ||
               c.association == Association::kMaximumLikelihood ||
               c.association == Association::kDataAssociationSampling,
           "unknown association");
+  if (c.algorithm == Algorithm::kEkf) validate_ekf(c);
   const MotionConfig& m = c.motion;
   for (int k = 0; k < 2; ++k) {
     require(std::isfinite(m.sigma_control[k]) && m.sigma_control[k] >= 0,
@@ -83,6 +97,8 @@ std::string_view to_string(Algorithm algorithm) {
       return "fastslam1";
     case Algorithm::kFastSlam2:
       return "fastslam2";
+    case Algorithm::kEkf:
+      return "ekf";
   }
   return "unknown";
 }

@@ -1,7 +1,8 @@
-// Everything a `Filter` is built from: the algorithm, the particle count, the association mode,
-// the motion and sensor models with their noises, the existence (log-odds) parameters, the
-// resampling policy, the seed and the threads. One plain struct, validated once by
-// `validate(config)`, which names the first field that is wrong.
+// Everything a `Filter` (or the EKF-SLAM baseline, engine/ekf_slam.h) is built from: the
+// algorithm, the particle count, the association mode, the motion and sensor models with their
+// noises, the existence (log-odds) parameters, the resampling policy, the EKF's gates, the seed
+// and the threads. One plain struct, validated once by `validate(config)`, which names the first
+// field that is wrong.
 //
 // Thread safety: value types. Costs: validation is O(1).
 #pragma once
@@ -17,7 +18,11 @@
 
 namespace fastslam::engine {
 
-enum class Algorithm : std::uint8_t { kFastSlam1, kFastSlam2 };
+enum class Algorithm : std::uint8_t {
+  kFastSlam1,
+  kFastSlam2,
+  kEkf,  // EKF-SLAM over the pose and every landmark: engine/ekf_slam.h, not `Filter`
+};
 enum class Association : std::uint8_t {
   kKnown,  // observations carry the landmark id (simulations, ground-truth tests)
   kMaximumLikelihood,          // eq. 64 (unknown association issue)
@@ -76,6 +81,19 @@ struct AssociationConfig {
   double search_scale = 1.5;
 };
 
+// EKF-SLAM (Algorithm::kEkf) with maximum-likelihood association: gates on the squared
+// Mahalanobis distance d2 = v^T S^-1 v of an observation to a landmark (chi-square with 2 degrees
+// of freedom when the association is right). An observation takes the nearest landmark (smallest
+// d2) if d2 < gate_accept, becomes a new landmark if d2 > gate_new for every landmark, and is
+// dropped in between (ambiguous). REQUIRES: 0 < gate_accept <= gate_new.
+struct EkfConfig {
+  double gate_accept = 5.991;  // chi2(2) 95% quantile
+  double gate_new = 13.816;    // chi2(2) 99.9% quantile
+  // Joint compatibility branch and bound (Neira and Tardos 2001) instead of the greedy nearest
+  // neighbour: the largest set of pairings that is jointly compatible at gate_accept's confidence.
+  bool joint_compatibility = false;
+};
+
 struct FilterConfig {
   Algorithm algorithm = Algorithm::kFastSlam1;
   std::uint32_t particles = 100;
@@ -89,11 +107,12 @@ struct FilterConfig {
   parallel::ResamplePolicy resample{parallel::ResamplePolicy::When::kEssBelowFraction, 0.75,
                                     parallel::ResampleScheme::kSystematic};
   std::uint64_t seed = 1;
-  unsigned threads = 0;      // 0: every core
-  std::size_t grain = 16;    // particles per parallel task
+  unsigned threads = 0;    // 0: every core
+  std::size_t grain = 16;  // particles per parallel task
   // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
   // store per particle per control and a reduction per control).
   bool record_trajectory = false;
+  EkfConfig ekf;  // Algorithm::kEkf only
   // The initial pose of every particle (x, y, theta; v, omega for kBrownian).
   double initial_pose[5] = {0, 0, 0, 0, 0};
 };

@@ -53,8 +53,8 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->capture_default_str();
   cmd.add_option("--data", o.data, "with --source log: the log file (docs/log-format.md)");
   add_world_options(cmd, o, w);
-  cmd.add_option("--algorithm", w.algorithm, "FastSLAM version")
-      ->check(CLI::IsMember({"fastslam1", "fastslam2"}))
+  cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
+      ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
       ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(CLI::Range(1U, 100'000'000U))
@@ -77,6 +77,16 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "simulated false alarms per scan (Poisson mean; ml, das)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
+  cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
+                 "ekf with ml: associate when the squared Mahalanobis distance is below this")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--ekf-gate-new", f.ekf.gate_new,
+                 "ekf with ml: a new landmark when every squared Mahalanobis distance exceeds it")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
+               "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
   cmd.add_option("--match-radius", o.match_radius,
                  "metres within which estimated and true landmarks are paired (ml, das)")
       ->check(CLI::PositiveNumber)
@@ -176,7 +186,9 @@ void apply_json_config(CLI::App& cmd, const std::string& path) {
 void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   const bool csv = !o.landmarks_csv.empty();
   o.sim.loops = w.loops > 0 ? w.loops : (csv ? 2 : 1);
-  o.filter.algorithm = w.algorithm == "fastslam2" ? Algorithm::kFastSlam2 : Algorithm::kFastSlam1;
+  o.filter.algorithm = w.algorithm == "ekf"         ? Algorithm::kEkf
+                       : w.algorithm == "fastslam2" ? Algorithm::kFastSlam2
+                                                    : Algorithm::kFastSlam1;
   o.filter.association = w.association == "ml"    ? Association::kMaximumLikelihood
                          : w.association == "das" ? Association::kDataAssociationSampling
                                                   : Association::kKnown;

@@ -20,6 +20,7 @@
 #include <oneapi/tbb/info.h>
 
 #include "engine/angles.h"
+#include "engine/ekf_slam.h"
 #include "engine/filter.h"
 #include "tools/map_evaluation.h"
 #include "tools/log_format.h"
@@ -306,15 +307,20 @@ void write_poses_csv(std::ofstream& file, const std::vector<StampedPose>& poses)
 int run_simulation(const RunOptions& options) {
   Source source = open_source(options);
   const engine::FilterConfig config = filter_config(options, source.header);
-  engine::Filter filter(config);
+  const bool ekf = config.algorithm == engine::Algorithm::kEkf;
+  const std::uint32_t particles = ekf ? 1 : config.particles;
   ProgressBar progress(options.progress);
   ProgressState state;
   state.total = static_cast<std::uint64_t>(source.expected_controls);
-  state.particles = config.particles;
-  auto observe_state = [&] {
+  state.particles = particles;
+  auto observe_state = [&](auto& filter) {
     const engine::FilterStatistics st = filter.statistics();
     state.done = st.controls;
-    state.landmarks = filter.particles().landmark_count(0);
+    if constexpr (requires { filter.particles(); }) {
+      state.landmarks = filter.particles().landmark_count(0);
+    } else {
+      state.landmarks = filter.estimate().map.size();
+    }
     state.map_bytes = st.live_bytes;
   };
 
@@ -331,6 +337,11 @@ int run_simulation(const RunOptions& options) {
   Event event;
   double source_seconds = 0.0;
   double filter_seconds = 0.0;
+  engine::Estimate estimate;
+  std::vector<engine::TrajectoryPoint> points;
+  engine::FilterStatistics stats;
+  // The loop, the same for the FastSLAM `Filter` and the `EkfSlam` baseline (same methods).
+  auto drive = [&](auto& filter) {
   for (;;) {
     const auto t0 = Clock::now();
     if (!source.events->next(event, scan)) break;
@@ -348,7 +359,7 @@ int run_simulation(const RunOptions& options) {
         }
         filter.observe(scan);
         if (progress.due()) {
-          observe_state();
+          observe_state(filter);
           progress.draw(state);
         }
         break;
@@ -363,12 +374,21 @@ int run_simulation(const RunOptions& options) {
     filter_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
   }
   const auto t_end = Clock::now();
-  const engine::Estimate estimate = filter.estimate();
-  const std::vector<engine::TrajectoryPoint> points = filter.take_trajectory();
+  estimate = filter.estimate();
+  points = filter.take_trajectory();
   filter_seconds += std::chrono::duration<double>(Clock::now() - t_end).count();
+  stats = filter.statistics();
   if (progress.enabled()) {
-    observe_state();
+    observe_state(filter);
     progress.finish(state);
+  }
+  };
+  if (ekf) {
+    engine::EkfSlam filter(config);
+    drive(filter);
+  } else {
+    engine::Filter filter(config);
+    drive(filter);
   }
 
   // The estimated trajectory: the start, then the pose after every control.
@@ -397,14 +417,13 @@ int run_simulation(const RunOptions& options) {
                               : score.rmse_m;
   const auto observed_count =
       static_cast<std::size_t>(std::count(observed.begin(), observed.end(), true));
-  const engine::FilterStatistics stats = filter.statistics();
 
   nlohmann::json metrics = {
       {"source", options.source},
       {"world", source.name},
       {"motion", engine::to_string(config.motion.kind)},
       {"algorithm", engine::to_string(config.algorithm)},
-      {"particles", config.particles},
+      {"particles", particles},
       {"association", engine::to_string(config.association)},
       {"seed", config.seed},
       {"threads", config.threads > 0 ? config.threads : unsigned(tbb::info::default_concurrency())},
@@ -452,7 +471,7 @@ int run_simulation(const RunOptions& options) {
     metrics["gps_fixes_skipped"] = fixes.skipped;
   }
   std::printf("%s, M = %u, %s association, seed %llu: %llu steps, %llu scans, %zu landmarks\n",
-              std::string(engine::to_string(config.algorithm)).c_str(), config.particles,
+              std::string(engine::to_string(config.algorithm)).c_str(), particles,
               std::string(engine::to_string(config.association)).c_str(),
               static_cast<unsigned long long>(config.seed),
               static_cast<unsigned long long>(stats.controls),

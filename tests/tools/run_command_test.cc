@@ -259,5 +259,51 @@ TEST(RunCommand, LogSourceRefusesAMissingOrMalformedLog) {
   std::filesystem::remove(o.data);
 }
 
+TEST(RunCommand, EkfOnWebmapWritesTheSameOutputs) {
+  FASTSLAM_REQUIRE_SHARED(shared);
+  RunOptions o;
+  o.landmarks_csv = shared + "/data/bailey_sim/example_webmap_landmarks.csv";
+  o.waypoints_csv = shared + "/data/bailey_sim/example_webmap_waypoints.csv";
+  o.sim.loops = 2;
+  o.filter.algorithm = engine::Algorithm::kEkf;
+  o.out = temp_dir("run_webmap_ekf");
+  o.progress = false;
+  ASSERT_EQ(run_simulation(o), 0);
+  std::ifstream in(o.out + "/metrics.json");
+  const nlohmann::json m = nlohmann::json::parse(in);
+  EXPECT_EQ(m["algorithm"], "ekf");
+  EXPECT_EQ(m["particles"], 1);
+  EXPECT_EQ(m["association"], "known");
+  EXPECT_EQ(m["steps"], 17382);
+  EXPECT_EQ(m["scans"], 1931);
+  EXPECT_EQ(m["landmarks"], 30);  // of 35: the ones the route sees, as FastSLAM's
+  // Seed 1 measured 4.2 m (seeds 1..10: 4.6 +- 1.5 m, engine/ekf_slam_test.cc).
+  EXPECT_LT(m["pose_rmse_m"].get<double>(), 10.0);
+  EXPECT_LT(m["landmark_rmse_m"].get<double>(), 10.0);
+  EXPECT_EQ(line_count(o.out + "/trajectory.csv"), 17382u + 1);
+  EXPECT_EQ(line_count(o.out + "/landmarks.csv"), 30u + 1);
+  std::filesystem::remove_all(o.out);
+}
+
+TEST(RunCommand, EkfWithMaximumLikelihoodOnASmallGrid) {
+  RunOptions o;
+  o.progress = false;
+  o.landmarks = 200;
+  o.filter.algorithm = engine::Algorithm::kEkf;
+  o.filter.association = engine::Association::kMaximumLikelihood;
+  o.sim.loops = 1;
+  o.out = temp_dir("run_grid_ekf");
+  ASSERT_EQ(run_simulation(o), 0);
+  std::ifstream in(o.out + "/metrics.json");
+  const nlohmann::json m = nlohmann::json::parse(in);
+  EXPECT_EQ(m["association"], "ml");
+  EXPECT_GT(m["landmarks"].get<int>(), 150);
+  EXPECT_LT(m["landmarks"].get<int>(), 230);
+  EXPECT_LT(m["pose_rmse_m"].get<double>(), 5.0);
+  // Against the nearest true landmark (ML ids are not the world's).
+  EXPECT_LT(m["landmark_rmse_m"].get<double>(), 5.0);
+  std::filesystem::remove_all(o.out);
+}
+
 }  // namespace
 }  // namespace fastslam::tools
