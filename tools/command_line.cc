@@ -73,6 +73,14 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->capture_default_str();
   cmd.add_flag("!--no-negative-information", f.existence.negative_information,
                "never remove landmarks that were in view and not seen (ml, das)");
+  cmd.add_option("--existence-missed", f.existence.missed,
+                 "log-odds a landmark loses when in view and not seen (ml, das)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--existence-range-margin", f.existence.range_margin,
+                 "metres inside the sensor range where a missed landmark counts (ml, das)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd.add_option("--clutter", o.sim.clutter_rate,
                  "simulated false alarms per scan (Poisson mean; ml, das)")
       ->check(CLI::Range(0.0, 1000.0))
