@@ -8,6 +8,7 @@
 #include "tools/command_line.h"
 #include "tools/memory_demo.h"
 #include "tools/run_command.h"
+#include "tools/scaling_study.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"fastslam: a parallel, high-throughput FastSLAM 1.0/2.0 engine"};
@@ -44,6 +45,37 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 1024));
   demo_cmd->add_option("--out", demo.out, "directory to write metrics.json into");
 
+  // fastslam bench scaling: the scaling study in N (tools/scaling_study.h).
+  CLI::App* bench_cmd = app.add_subcommand("bench", "throughput studies");
+  bench_cmd->require_subcommand(1);
+  fastslam::tools::ScalingOptions scaling;
+  std::string scaling_algorithm = "fastslam1", scaling_association = "ml", scaling_json;
+  CLI::App* scaling_cmd = bench_cmd->add_subcommand(
+      "scaling",
+      "time per sensor update and live memory against map size N at constant density (maps "
+      "pre-grown to N, then --updates scans timed); prints a table, writes JSON");
+  scaling_cmd->add_option("--landmarks", scaling.landmarks, "map sizes N, comma separated")
+      ->delimiter(',')
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
+      ->capture_default_str();
+  scaling_cmd->add_option("--particles", scaling.filter.particles, "particles (M)")
+      ->check(CLI::Range(1U, 10'000'000U))
+      ->capture_default_str();
+  scaling_cmd->add_option("--updates", scaling.updates, "sensor updates (scans) timed per N")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1'000'000}))
+      ->capture_default_str();
+  scaling_cmd->add_option("--algorithm", scaling_algorithm, "fastslam1 or fastslam2")
+      ->check(CLI::IsMember({"fastslam1", "fastslam2"}))
+      ->capture_default_str();
+  scaling_cmd->add_option("--association", scaling_association, "known or ml or das")
+      ->check(CLI::IsMember({"known", "ml", "das"}))
+      ->capture_default_str();
+  scaling_cmd->add_option("--threads", scaling.filter.threads, "worker threads (0: all cores)")
+      ->check(CLI::Range(0U, 4096U))
+      ->capture_default_str();
+  scaling_cmd->add_option("--seed", scaling.filter.seed, "random seed")->capture_default_str();
+  scaling_cmd->add_option("--json", scaling_json, "write the points as JSON to this file");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (run_cmd->parsed()) {
@@ -59,6 +91,17 @@ int main(int argc, char** argv) {
       return fastslam::tools::convert_to_log(convert);
     }
     if (demo_cmd->parsed()) return fastslam::tools::run_memory_demo(demo);
+    if (scaling_cmd->parsed()) {
+      using fastslam::engine::Algorithm;
+      using fastslam::engine::Association;
+      scaling.filter.algorithm =
+          scaling_algorithm == "fastslam2" ? Algorithm::kFastSlam2 : Algorithm::kFastSlam1;
+      scaling.filter.association = scaling_association == "known" ? Association::kKnown
+                                   : scaling_association == "das"
+                                       ? Association::kDataAssociationSampling
+                                       : Association::kMaximumLikelihood;
+      return fastslam::tools::run_scaling_command(scaling, scaling_json);
+    }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "fastslam: error: %s\n", e.what());
     return 1;
