@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Draws a `fastslam run` output directory: true path, GPS fixes, estimated path, true landmarks
-and the estimated map (with 2-sigma ellipses when few enough), into DIR/run.png.
+and the estimated map (with 2-sigma ellipses when few enough), into DIR/map.png.
 
 Usage: tools/plot_run.py DIR   (Debian's python3-matplotlib; run with /usr/bin/python3)
 """
@@ -70,9 +70,13 @@ def main():
                 label="estimated path (weighted mean)")
     title = "fastslam run"
     if metrics:
-        title = "{} M={} seed={}: pose RMSE {:.2f} m, landmark RMSE {:.2f} m".format(
-            metrics.get("algorithm"), metrics.get("particles"), metrics.get("seed"),
-            metrics.get("pose_rmse_m", float("nan")), metrics.get("landmark_rmse_m", float("nan")))
+        title = "{} M={} {} seed={}:".format(metrics.get("algorithm"), metrics.get("particles"),
+                                             metrics.get("association"), metrics.get("seed"))
+        if "pose_rmse_m" in metrics:
+            title += " pose RMSE {:.2f} m,".format(metrics["pose_rmse_m"])
+        if "landmark_rmse_m" in metrics:
+            title += " landmark RMSE {:.2f} m,".format(metrics["landmark_rmse_m"])
+        title = title.rstrip(",")
         if "gps_rmse_m" in metrics:
             title += ", GPS RMSE {:.2f} m".format(metrics["gps_rmse_m"])
     ax.set_title(title, fontsize=10)
@@ -82,7 +86,7 @@ def main():
     ax.legend(loc="best", fontsize=8)
     ax.grid(True, lw=0.3)
     fig.tight_layout()
-    path = os.path.join(out, "run.png")
+    path = os.path.join(out, "map.png")
     fig.savefig(path)
     print("wrote", path)
 
