@@ -224,12 +224,12 @@ struct Filter::Impl {
             associate_particle<Motion>(
                 i, load(i), *scan, scan_step,
                 fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
-                save, cov_of, scratch, &scratch.assignment[(i - begin) * scan->size()]);
+                save, cov_of, scratch, scratch.assignment.data() + (i - begin) * scan->size());
           }
           t_associated = Clock::now();
           for (std::size_t i = begin; i < end; ++i) {
             update_particle_unknown(i, *scan, scan_step, scratch,
-                                    &scratch.assignment[(i - begin) * scan->size()]);
+                                    scratch.assignment.data() + (i - begin) * scan->size());
           }
         }
       }

@@ -1460,6 +1460,9 @@ TEST_P(FilterUnknownAssociationTest, RefusedInputLeavesTheFilterExactlyAsItWas) 
   const std::size_t cut = s.events.size() / 2;
   feed(filter, s.events, 0, cut);
   feed(twin, s.events, 0, cut);
+  // An empty scan is a valid scan (every landmark in view is missed).
+  filter.observe({});
+  twin.observe({});
   std::vector<Observation> bad = {{10.0, 0.1, -1}, {kNaN, 0.2, -1}};
   expect_throw_with<std::invalid_argument>([&] { filter.observe(bad); }, "observation 1");
   bad[1] = {-2.0, 0.0, -1};
