@@ -37,8 +37,9 @@ int main(int argc, char** argv) {
   demo_cmd->add_option("--particles", demo.particles, "particles (M)")
       ->check(CLI::Range(1U, 10'000'000U));
   demo_cmd->add_option("--steps", demo.steps, "steps")->check(CLI::Range(1U, 1'000'000U));
-  demo_cmd->add_option("--updates-per-step", demo.updates_per_step,
-                       "landmarks each particle changes per step (K)")
+  demo_cmd
+      ->add_option("--updates-per-step", demo.updates_per_step,
+                   "landmarks each particle changes per step (K)")
       ->check(CLI::Range(0U, 1'000'000U));
   demo_cmd->add_option("--seed", demo.seed, "random seed");
   demo_cmd->add_option("--threads", demo.threads, "worker threads (0: all cores)")
@@ -49,7 +50,8 @@ int main(int argc, char** argv) {
   CLI::App* bench_cmd = app.add_subcommand("bench", "throughput studies");
   bench_cmd->require_subcommand(1);
   fastslam::tools::ScalingOptions scaling;
-  std::string scaling_algorithm = "fastslam1", scaling_association = "ml", scaling_json;
+  std::string scaling_algorithm = "fastslam1", scaling_association = "ml", scaling_json,
+              scaling_engine = "tree";
   CLI::App* scaling_cmd = bench_cmd->add_subcommand(
       "scaling",
       "time per sensor update and live memory against map size N at constant density (maps "
@@ -63,6 +65,17 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   scaling_cmd->add_option("--updates", scaling.updates, "sensor updates (scans) timed per N")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1'000'000}))
+      ->capture_default_str();
+  scaling_cmd
+      ->add_option("--engine", scaling_engine,
+                   "tree (the filter) or linear (the baseline: flat maps copied at resampling, "
+                   "FastSLAM 1.0 with ML only, one thread)")
+      ->check(CLI::IsMember({"tree", "linear"}))
+      ->capture_default_str();
+  scaling_cmd
+      ->add_option("--linear-max-landmarks", scaling.linear_max_landmarks,
+                   "largest N the linear engine accepts (it is O(M N) per update)")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
       ->capture_default_str();
   scaling_cmd->add_option("--algorithm", scaling_algorithm, "fastslam1 or fastslam2")
       ->check(CLI::IsMember({"fastslam1", "fastslam2"}))
@@ -94,6 +107,8 @@ int main(int argc, char** argv) {
     if (scaling_cmd->parsed()) {
       using fastslam::engine::Algorithm;
       using fastslam::engine::Association;
+      scaling.engine = scaling_engine == "linear" ? fastslam::tools::ScalingEngine::kLinear
+                                                  : fastslam::tools::ScalingEngine::kTree;
       scaling.filter.algorithm =
           scaling_algorithm == "fastslam2" ? Algorithm::kFastSlam2 : Algorithm::kFastSlam1;
       scaling.filter.association = scaling_association == "known" ? Association::kKnown

@@ -11,19 +11,31 @@
 // and the resampling). Memory: the heap's live bytes at the end, and a lower bound, the live
 // bytes of the one shared map right after set_map (every particle needs at least that).
 //
+// Engines: `kTree` is the filter (engine/filter.h); `kLinear` the linear-copy baseline
+// (tools/linear_baseline.h: flat per-particle maps copied whole at resampling, FastSLAM 1.0 with
+// ML only, resampling every scan), given the same prior map as flat copies; its live bytes are
+// the sum of the maps' capacities and its lower bound one flat map (N * 64 bytes). It is O(M N)
+// per update, so it refuses N above `linear_max_landmarks`.
+//
 // Ownership: plain values. Thread safety: one study per call; the filter runs its own threads.
 // Costs: O(N log N) setup per point (world, kd-tree, map), then the updates.
 #pragma once
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "engine/filter_config.h"
 
 namespace fastslam::tools {
 
+enum class ScalingEngine : std::uint8_t { kTree, kLinear };
+std::string_view to_string(ScalingEngine engine);
+
 struct ScalingOptions {
+  ScalingEngine engine = ScalingEngine::kTree;
+  std::uint64_t linear_max_landmarks = 100'000;  // kLinear refuses larger N
   std::vector<std::uint64_t> landmarks = {1'000, 1'000'000};
   std::uint64_t updates = 500;  // scans timed per point
   double spacing = 10.0;        // m per landmark
@@ -38,16 +50,19 @@ struct ScalingPoint {
   double seconds_per_update = 0.0;
   std::int64_t live_bytes = 0;
   std::int64_t lower_bound_bytes = 0;  // one map
+  double pose_error = 0.0;  // m, weighted mean position against the truth after the last update
   double predict_seconds = 0.0, associate_seconds = 0.0, update_seconds = 0.0,
          resample_seconds = 0.0;  // thread-seconds per phase (FilterStatistics)
 };
 
-// Throws std::invalid_argument for N = 0, zero updates, or an invalid filter config.
+// Throws std::invalid_argument for N = 0, zero updates, an invalid filter config, or (kLinear)
+// N above linear_max_landmarks or a config the baseline does not support.
 ScalingPoint run_scaling_point(const ScalingOptions& options, std::uint64_t landmarks);
 
 // Every N of the options in turn: prints a table to stdout and, if `json_path` is not empty,
 // writes {"config": ..., "points": [{landmarks, seconds_per_update, live_bytes,
-// lower_bound_bytes, ...}]} there. Returns the process exit code.
+// lower_bound_bytes, ...}]} there. Checks every N against the engine's limits before running
+// any (throws std::invalid_argument). Returns the process exit code.
 int run_scaling_command(const ScalingOptions& options, const std::string& json_path);
 
 }  // namespace fastslam::tools

@@ -7,17 +7,19 @@
 #include <fstream>
 #include <stdexcept>
 #include <string>
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
-#include <unistd.h>
+
+#include "memory/landmark_tree.h"
 
 namespace fastslam::tools {
 namespace {
 
 TEST(ScalingStudy, PointsShareOneMapAndTheJsonHasTheContractedKeys) {
-  for (const auto association : {engine::Association::kKnown,
-                                 engine::Association::kMaximumLikelihood}) {
+  for (const auto association :
+       {engine::Association::kKnown, engine::Association::kMaximumLikelihood}) {
     SCOPED_TRACE(std::string(engine::to_string(association)));
     ScalingOptions o;
     o.landmarks = {1'000, 4'000};
@@ -42,11 +44,56 @@ TEST(ScalingStudy, PointsShareOneMapAndTheJsonHasTheContractedKeys) {
       EXPECT_GE(live, one_map);
       EXPECT_LT(live, 3.0 * one_map) << "20 particles must share one map, not hold 20";
       EXPECT_TRUE(p.contains("seconds_per_phase"));
+      EXPECT_TRUE(p.contains("pose_error_m"));
     }
     EXPECT_EQ(j["points"][1]["landmarks"], 4000);
     EXPECT_EQ(j["config"]["association"], engine::to_string(association));
+    EXPECT_EQ(j["config"]["engine"], "tree");
     std::filesystem::remove(json);
   }
+}
+
+// The linear baseline tracks the truth as well as the tree engine (both within a loose bound of
+// the truth on a small world), but holds M whole maps where the tree engine holds about one.
+TEST(ScalingStudy, LinearBaselineTracksAsWellAndHoldsMMaps) {
+  ScalingOptions o;
+  o.updates = 150;
+  o.filter.particles = 30;
+  o.filter.threads = 2;
+  o.filter.association = engine::Association::kMaximumLikelihood;
+  o.engine = ScalingEngine::kTree;
+  const ScalingPoint tree = run_scaling_point(o, 2'000);
+  o.engine = ScalingEngine::kLinear;
+  const ScalingPoint linear = run_scaling_point(o, 2'000);
+  EXPECT_EQ(linear.updates, 150u);
+  EXPECT_EQ(linear.observations, tree.observations);  // the same scans
+  // About 45 m driven along a lane with the true map as a prior: both stay within 1 m.
+  EXPECT_LT(tree.pose_error, 1.0);
+  EXPECT_LT(linear.pose_error, 1.0);
+  const double one_flat_map = 2'000.0 * sizeof(memory::Landmark);
+  EXPECT_EQ(linear.lower_bound_bytes, static_cast<std::int64_t>(one_flat_map));
+  EXPECT_GE(static_cast<double>(linear.live_bytes), 0.5 * 30 * one_flat_map);
+  EXPECT_LT(static_cast<double>(tree.live_bytes),
+            3.0 * static_cast<double>(tree.lower_bound_bytes));
+  EXPECT_GT(linear.live_bytes, 5 * tree.live_bytes);
+}
+
+TEST(ScalingStudy, LinearBaselineRefusesLargeMapsAndUnsupportedConfigs) {
+  ScalingOptions o;
+  o.engine = ScalingEngine::kLinear;
+  o.updates = 5;
+  o.filter.association = engine::Association::kMaximumLikelihood;
+  o.linear_max_landmarks = 1'000;
+  try {
+    run_scaling_point(o, 1'001);
+    ADD_FAILURE() << "N above the cap was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cap of 1000"), std::string::npos) << e.what();
+  }
+  o.landmarks = {100, 1'001};  // the command checks every N before running any
+  EXPECT_THROW(run_scaling_command(o, ""), std::invalid_argument);
+  o.filter.algorithm = engine::Algorithm::kFastSlam2;
+  EXPECT_THROW(run_scaling_point(o, 100), std::invalid_argument);
 }
 
 TEST(ScalingStudy, RefusesBadOptions) {

@@ -1,0 +1,110 @@
+// The linear-copy baseline of the paper's section 8 (fig. 14-15): a deliberately plain FastSLAM
+// 1.0 whose particles each own a flat std::vector of landmarks, copied whole whenever
+// resampling duplicates a particle, with maximum-likelihood association by a linear scan of the
+// particle's map. It exists to be measured against the tree engine (engine/filter.h) in
+// `fastslam bench scaling --engine linear`, so it is kept simple and shares the engine's math:
+//   - motion: BaileyCarModel::sample with the keyed normals (seed, control step, particle,
+//     Purpose::kMotion), one control at a time;
+//   - association: every landmark of the map is tested against the disc around the position
+//     each observation implies (the same Euclidean radius the engine derives from its gate),
+//     candidates are scored by evaluate_observation and gated on the Mahalanobis distance, and
+//     associate_maximum_likelihood chooses for the whole scan (mutual exclusion, ln p0 for new);
+//   - update: apply_update (Joseph form), existence log-odds with negative information for the
+//     landmarks in the sensor footprint (eq. 73-75, removed below the bound), and
+//     initialize_landmark for new ones;
+//   - resampling: systematic after EVERY scan (the paper's setting; the config's policy is
+//     ignored), ancestors from parallel::draw_ancestors_sequential; a particle drawn k times
+//     gives its map to one child and k - 1 whole copies to the others.
+// Supported: Algorithm::kFastSlam1, Association::kMaximumLikelihood, MotionKind::kBaileyCar;
+// the constructor refuses anything else.
+//
+// Ownership: the baseline owns its particles and their maps; `observe` and `set_map` borrow their
+// spans for the call. Thread safety: thread-compatible; it runs on the calling thread only
+// (config.threads is ignored).
+// Costs (M particles, N landmarks per map, Z observations): `predict` O(M); `observe`
+// O(M (N + Z k)) for the scan of every map plus O(M N) for the copies at resampling;
+// `set_map` O(M N); memory M maps of N * 64 bytes (live_bytes() sums the capacities).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "engine/association.h"
+#include "engine/filter.h"
+#include "engine/filter_config.h"
+#include "engine/measurement_model.h"
+#include "engine/motion_model.h"
+#include "memory/landmark_tree.h"
+
+namespace fastslam::tools {
+
+struct LinearStatistics {
+  std::uint64_t controls = 0, scans = 0, observations = 0;
+  std::uint64_t weight_resets = 0;  // scans whose every weight was zero (reset to uniform)
+  std::uint64_t map_copies = 0;     // whole maps copied by resampling
+  std::uint64_t landmarks_created = 0, landmarks_removed = 0;
+  double predict_seconds = 0.0, associate_seconds = 0.0, update_seconds = 0.0,
+         resample_seconds = 0.0;
+};
+
+class LinearFastSlam {
+ public:
+  // Throws std::invalid_argument as engine::validate(config), and unless the algorithm is
+  // FastSLAM 1.0, the association ML and the motion model Bailey's car.
+  explicit LinearFastSlam(const engine::FilterConfig& config);
+
+  // Every particle's map becomes a copy of `landmarks` (ids and log-odds kept, last_seen 0).
+  // Throws std::invalid_argument (and changes nothing) for a non-finite position, a covariance
+  // that is not symmetric positive definite or non-finite log-odds, naming the landmark.
+  void set_map(std::span<const engine::MapLandmark> landmarks);
+
+  // Samples one control step for every particle. Throws std::invalid_argument (and changes
+  // nothing) unless dt >= 0 and the values are finite.
+  void predict(const engine::Control& control, double dt);
+
+  // Associates, updates every particle's map and weight, then resamples. Throws
+  // std::invalid_argument (and changes nothing) for a non-finite value or a range <= 0.
+  void observe(std::span<const engine::Observation> scan);
+
+  // The weighted mean pose (x, y, circular mean of theta).
+  engine::Pose mean_pose() const;
+
+  // Sum over particles of map.capacity() * sizeof(memory::Landmark).
+  std::int64_t live_bytes() const;
+
+  std::size_t particles() const { return particles_.size(); }
+  const std::vector<memory::Landmark>& map(std::size_t particle) const {
+    return particles_[particle].map;
+  }
+  const LinearStatistics& statistics() const { return stats_; }
+
+ private:
+  struct Particle {
+    engine::Pose pose = engine::Pose::Zero();
+    double log_weight = 0.0;
+    std::vector<memory::Landmark> map;
+  };
+  // Systematic resampling with the streams of (seed, scan_step); duplicates copy their map.
+  void resample_after(std::uint64_t scan_step);
+  double measurement_variance(double range) const;
+
+  engine::FilterConfig config_;
+  engine::BaileyCarModel motion_;
+  engine::RangeBearingModel sensor_;
+  Eigen::Matrix2d r_;
+  std::vector<Particle> particles_;
+  double landmark_variance_bound_ = 0.0;  // as the engine's: bounds the candidate search radius
+  std::uint64_t step_ = 0;                // controls and scans so far: keys the random streams
+  LinearStatistics stats_;
+  // Scratch reused across particles.
+  std::vector<engine::AssociationCandidate> candidates_;
+  std::vector<std::int64_t> assignment_;
+  std::vector<std::uint32_t> in_view_;
+  std::vector<std::uint32_t> touched_;
+  std::vector<std::uint32_t> doomed_;
+};
+
+}  // namespace fastslam::tools
