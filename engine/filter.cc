@@ -21,9 +21,11 @@
 
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
+#include "engine/motion_batch.h"
 #include "engine/motion_model.h"
 #include "engine/proposal.h"
 #include "memory/node_heap.h"
+#include "parallel/internal/vmath.h"
 #include "parallel/particle_kernel.h"
 #include "parallel/random_stream.h"
 #include "parallel/resample.h"
@@ -110,9 +112,6 @@ struct Filter::Impl {
     constexpr int N = Motion::kStateDim;
     using State = typename Motion::State;
     using Cov = Eigen::Matrix<double, N, N>;
-    const typename Motion::Control sigmas(config.motion.sigma_control[0],
-                                          config.motion.sigma_control[1]);
-    const typename Motion::ControlCovariance control_cov = Motion::control_covariance(sigmas);
     const bool fs2 = config.algorithm == Algorithm::kFastSlam2;
     const std::uint64_t seed = config.seed;
     double* col[5] = {store.x().data(), store.y().data(), store.theta().data(), store.v().data(),
@@ -134,45 +133,11 @@ struct Filter::Impl {
       recorded.assign(pending.size() * m * 4, 0.0);
       snapshot_weights();
     }
-    auto remember = [&](std::size_t k, std::size_t i, const State& s) {
-      double* out = &recorded[(k * m + i) * 4];
-      out[0] = s[0];
-      out[1] = s[1];
-      out[2] = std::cos(s[2]);
-      out[3] = std::sin(s[2]);
-    };
-
     kernel.for_each_block(store.size(), [&](std::size_t begin, std::size_t end) {
       const Clock::time_point t0 = Clock::now();
       const std::size_t count = end - begin;
-      // Controls: one batch of normals per control for the whole block (vectorised), then the
-      // motion of each particle.
-      thread_local std::vector<double> normals;
-      for (std::size_t k = 0; k < pending.size(); ++k) {
-        const PendingControl& c = pending[k];
-        typename Motion::Control u(c.u0, c.u1);
-        if constexpr (std::is_same_v<Motion, BrownianVelocityModel>) u.setZero();
-        if (!fs2) {
-          normals.resize(2 * count);
-          parallel::normals_for_particles(seed, c.step, parallel::Purpose::kMotion,
-                                          static_cast<std::uint32_t>(begin), count, 2, normals);
-          for (std::size_t i = begin; i < end; ++i) {
-            const State next = motion.sample(load(i), u, c.dt, sigmas, &normals[2 * (i - begin)]);
-            save(i, next);
-            if (record) remember(k, i, next);
-          }
-        } else {
-          for (std::size_t i = begin; i < end; ++i) {
-            const State s = load(i);
-            auto p = cov_of(i);
-            const Cov j = motion.jacobian_pose(s, u, c.dt);
-            Cov next = j * p * j.transpose() + motion.pose_noise(s, u, c.dt, control_cov);
-            p = 0.5 * (next + next.transpose());
-            const State mean = motion.predict(s, u, c.dt);
-            save(i, mean);
-            if (record) remember(k, i, mean);
-          }
-        }
+      if (!pending.empty()) {
+        advance_block(motion, begin, count, record ? recorded.data() : nullptr);
       }
       const Clock::time_point t1 = Clock::now();
       if (scan != nullptr) {
@@ -197,6 +162,92 @@ struct Filter::Impl {
       times.update += seconds_between(t1, t2);
     });
     if (record) reduce_recorded(m);
+  }
+
+  // The queued controls applied to particles [begin, begin + count) (one task's block): the
+  // block's states (and, for FastSLAM 2.0, the upper triangles of its pose covariances) are
+  // copied into this thread's lane columns, padded to whole groups of kMotionLanes, carried
+  // through every control by the vectorised kernels of engine/motion_batch.h, and copied back.
+  // `recorded` (null unless record_trajectory) receives x, y, cos, sin per control and particle.
+  template <class Motion>
+  void advance_block(const Motion& motion, std::size_t begin, std::size_t count,
+                     double* recorded_out) {
+    constexpr int N = Motion::kStateDim;
+    constexpr int E = kCovEntries<N>;
+    const bool fs2 = config.algorithm == Algorithm::kFastSlam2;
+    const typename Motion::Control sigmas(config.motion.sigma_control[0],
+                                          config.motion.sigma_control[1]);
+    const std::size_t lanes = padded_lanes(count);
+    const std::size_t k_steps = pending.size();
+    // Columns: N states, then (FastSLAM 2.0) E covariance entries or (FastSLAM 1.0) two normals
+    // per control step.
+    thread_local std::vector<double> scratch;
+    thread_local std::vector<ControlStep> steps;
+    const std::size_t columns = N + (fs2 ? E : 2 * k_steps);
+    scratch.assign(columns * lanes, 0.0);
+    auto column = [&](std::size_t c) { return scratch.data() + c * lanes; };
+    steps.resize(k_steps);
+    for (std::size_t k = 0; k < k_steps; ++k) {
+      const PendingControl& c = pending[k];
+      steps[k] = {c.u0, c.u1, c.dt};
+      if constexpr (std::is_same_v<Motion, BrownianVelocityModel>) steps[k].u0 = steps[k].u1 = 0;
+    }
+    double* const store_col[5] = {store.x().data(), store.y().data(), store.theta().data(),
+                                  store.v().data(), store.omega().data()};
+    StateBlock<N> block;
+    block.lanes = lanes;
+    for (int k = 0; k < N; ++k) {
+      block.col[k] = column(k);
+      std::copy_n(store_col[k] + begin, count, block.col[k]);
+    }
+    CovBlock<N> cov{};
+    if (fs2) {
+      for (int row = 0, e = 0; row < N; ++row) {
+        for (int c = row; c < N; ++c, ++e) {
+          cov[e] = column(N + e);
+          for (std::size_t l = 0; l < count; ++l) {
+            cov[e][l] = pose_cov[(begin + l) * 25 + c * N + row];
+          }
+        }
+      }
+    } else {
+      for (std::size_t k = 0; k < k_steps; ++k) {
+        parallel::normal_pairs_for_particles(
+            config.seed, pending[k].step, parallel::Purpose::kMotion,
+            static_cast<std::uint32_t>(begin), count, {column(N + 2 * k), count},
+            {column(N + 2 * k + 1), count});
+      }
+    }
+    const std::size_t m = store.size();
+    // Recording the trajectory needs the poses after every step; otherwise one call runs them all.
+    const std::size_t per_call = recorded_out != nullptr ? 1 : k_steps;
+    for (std::size_t k = 0; k < k_steps; k += per_call) {
+      const std::span<const ControlStep> run(steps.data() + k, per_call);
+      if (fs2) {
+        predict_block(motion, block, run, sigmas, cov);
+      } else {
+        sample_block(motion, block, run, sigmas, column(N + 2 * k));
+      }
+      if (recorded_out != nullptr) {
+        for (std::size_t l = 0; l < count; ++l) {
+          double* out = &recorded_out[(k * m + begin + l) * 4];
+          out[0] = block.col[0][l];
+          out[1] = block.col[1][l];
+          parallel::internal::sincos(block.col[2][l], out[2], out[3]);
+        }
+      }
+    }
+    for (int k = 0; k < N; ++k) std::copy_n(block.col[k], count, store_col[k] + begin);
+    if (fs2) {
+      for (int row = 0, e = 0; row < N; ++row) {
+        for (int c = row; c < N; ++c, ++e) {
+          for (std::size_t l = 0; l < count; ++l) {
+            double* p = &pose_cov[(begin + l) * 25];
+            p[c * N + row] = p[row * N + c] = cov[e][l];
+          }
+        }
+      }
+    }
   }
 
   // w_i = exp(l_i - max l): the weights the recorded poses are averaged with.
@@ -567,8 +618,8 @@ void Filter::save(std::ostream& out) const {
 #endif
 #endif
   put(out, config);
-  for (std::uint64_t v : {s.step, s.controls, s.scans, s.observations, s.resamples,
-                          s.weight_resets}) {
+  for (std::uint64_t v :
+       {s.step, s.controls, s.scans, s.observations, s.resamples, s.weight_resets}) {
     put(out, v);
   }
   put_vector(out, s.pending);
@@ -581,8 +632,8 @@ void Filter::save(std::ostream& out) const {
   put_vector(out, known);
   put_vector(out, s.pose_cov);
   const memory::ParticleStore& store = s.store;
-  for (std::span<const double> column : {store.x(), store.y(), store.theta(), store.v(),
-                                         store.omega(), store.log_weight()}) {
+  for (std::span<const double> column :
+       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
     out.write(reinterpret_cast<const char*>(column.data()),
               static_cast<std::streamsize>(column.size() * sizeof(double)));
   }
@@ -664,8 +715,8 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   for (const KnownSlot& k : known) s.known_slots.emplace(k.id, k.slot);
   s.pose_cov = std::move(pose_cov);
   memory::ParticleStore& store = s.store;
-  for (std::span<double> column : {store.x(), store.y(), store.theta(), store.v(), store.omega(),
-                                   store.log_weight()}) {
+  for (std::span<double> column :
+       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
     read_bytes(in, column.data(), column.size() * sizeof(double));
   }
   for (std::size_t i = 0; i < store.size(); ++i) {

@@ -10,6 +10,7 @@
 #include <span>
 
 #include "parallel/internal/philox.h"
+#include "parallel/internal/vmath.h"
 
 namespace fastslam::parallel {
 namespace {
@@ -35,116 +36,13 @@ constexpr std::size_t kLanes = 16;
 constexpr std::size_t kTailLanes = 4;
 
 // ---------------------------------------------------------------------------------------------
-// Floating point. Everything below is written so that the compiler has no freedom that could
-// change a result between the scalar path and the vectorised one: every multiply-add is an
-// explicit fma where the target has a fast fma (FP_FAST_FMA; then std::fma is one instruction)
-// and a plain a * b + c where it has none (then the compiler cannot contract either), and no
-// other product feeds an addition (so -ffp-contract has nothing to contract). No libm calls:
-// glibc's vector and scalar log/sin/cos need not agree, and sqrt under -fmath-errno blocks
-// vectorisation. The errors below were measured against long-double libm on 2e7 random
-// arguments; random_stream_test checks the composite Box-Muller pair (within 8 ulp of
-// max(r, 1); measured 1.4).
+// Floating point: log, sqrt and sin/cos of parallel/internal/vmath.h, written so that the scalar
+// and the vectorised paths give the same bits (see there). random_stream_test checks the
+// composite Box-Muller pair (within 8 ulp of max(r, 1); measured 1.4).
 
-#if defined(FP_FAST_FMA)
-[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
-  return std::fma(a, b, c);
-}
-#else
-[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
-  return a * b + c;
-}
-#endif
-
-// Natural log of a positive normal double; error below 0.75 ulp (measured).
-// Reduction from musl's log (x = 2^k m, m in [sqrt(2)/2, sqrt(2))); polynomial from fdlibm's
-// e_log.c (Sun Microsystems, 1993): log(m) = 2 atanh(s), s = f / (2 + f), f = m - 1.
-[[gnu::always_inline]] inline double log_positive(double x) noexcept {
-  constexpr double kLn2Hi = 6.93147180369123816490e-01;  // k * kLn2Hi is exact for |k| < 2^11
-  constexpr double kLn2Lo = 1.90821492927058770002e-10;
-  constexpr double kLg1 = 6.666666666666735130e-01;
-  constexpr double kLg2 = 3.999999999940941908e-01;
-  constexpr double kLg3 = 2.857142874366239149e-01;
-  constexpr double kLg4 = 2.222219843214978396e-01;
-  constexpr double kLg5 = 1.818357216161805012e-01;
-  constexpr double kLg6 = 1.531383769920937332e-01;
-  constexpr double kLg7 = 1.479819860511658591e-01;
-  constexpr std::uint64_t kOff = 0x3FE6A09E667F3BCDu;  // bits of sqrt(2) / 2
-  const auto bits = std::bit_cast<std::uint64_t>(x);
-  const std::uint64_t tmp = bits - kOff;
-  const std::int64_t k = static_cast<std::int64_t>(tmp) >> 52;  // arithmetic shift (C++20)
-  const double m = std::bit_cast<double>(bits - (tmp & 0xFFF0000000000000u));
-  const auto dk = static_cast<double>(k);
-  const double f = m - 1.0;  // exact (Sterbenz)
-  const double s = f / (2.0 + f);
-  const double z = s * s;
-  const double w = z * z;
-  const double odd = z * madd(w, madd(w, madd(w, kLg7, kLg5), kLg3), kLg1);
-  const double r = madd(w, madd(w, madd(w, kLg6, kLg4), kLg2), odd);
-  const double hf = 0.5 * f;                                  // f * f / 2 = hf * f
-  const double inner = madd(s, madd(hf, f, r), dk * kLn2Lo);  // s (f^2/2 + R) + k ln2_lo
-  const double tail = madd(hf, f, -inner);                    // f^2/2 - inner
-  return madd(dk, kLn2Hi, f - tail);
-}
-
-// sqrt(v) for 0 <= v < 2^1000 (here v <= 74): reciprocal square root y by Newton from the
-// bit-level first guess (relative error 3.5e-2, then 1.8e-3, 4.7e-6, 3.3e-11), then one Newton
-// step on s = v y, which squares the error to ~1e-21 before rounding: error 0.5 ulp (measured;
-// not proven correctly rounded); sqrt(0) = 0. std::sqrt would not vectorise under -fmath-errno
-// (GCC's default), and its correctly rounded result could differ from this one.
-[[gnu::always_inline]] inline double sqrt_nonneg(double v) noexcept {
-  const double h = 0.5 * v;
-  double y = std::bit_cast<double>(0x5FE6EB50C7B537A9u - (std::bit_cast<std::uint64_t>(v) >> 1));
-  for (int i = 0; i < 3; ++i) y = y * madd(-(h * y), y, 1.5);
-  const double s = v * y;
-  return madd(madd(-s, s, v), 0.5 * y, s);  // s + (v - s^2) / (2 sqrt(v))
-}
-
-// Taylor coefficients on [-pi/4, pi/4], highest order first: kSinPoly[i] = (-1)^m / (2m + 1)!
-// for m = 8 - i (a^17 down to a^3), kCosPoly[i] = (-1)^m / (2m)! for m = 8 - i (a^16 down to
-// a^2). The first omitted terms are below 1e-19, far under an ulp.
-constexpr double inverse_factorial(int n) {
-  double f = 1.0;
-  for (int i = 2; i <= n; ++i) f *= i;  // exact up to 18!
-  return 1.0 / f;
-}
-constexpr std::array<double, 8> taylor(int first_odd_or_even) {
-  std::array<double, 8> c{};
-  for (int i = 0; i < 8; ++i) {
-    const int m = 8 - i;
-    c[i] = (m % 2 == 0 ? 1.0 : -1.0) * inverse_factorial(2 * m + first_odd_or_even);
-  }
-  return c;
-}
-constexpr std::array<double, 8> kSinPoly = taylor(1);
-constexpr std::array<double, 8> kCosPoly = taylor(0);
-
-// cos(2 pi t) and sin(2 pi t) for t = turns * 2^-53, turns an integer in [0, 2^53); absolute
-// error below 1.4 * 2^-53 (measured). The quadrant comes from rounding 4t, which is exact, so
-// there is no argument-reduction error.
-[[gnu::always_inline]] inline void sincos_turns(double turns, double& cos_out,
-                                                double& sin_out) noexcept {
-  constexpr double kShift = 0x1.8p52;  // adding it rounds [0, 2^51) to an integer
-  constexpr double kHalfPi = 1.57079632679489661923;
-  const double shifted = madd(turns, 0x1p-51, kShift);  // kShift + round(4t), ties to even
-  const auto quadrant = std::bit_cast<std::uint64_t>(shifted) & 3u;
-  const double r = madd(turns, 0x1p-51, -(shifted - kShift));  // 4t - round(4t), exact
-  const double a = r * kHalfPi;                                // in [-pi/4, pi/4]
-  const double z = a * a;
-  double sin_poly = kSinPoly[0];
-  double cos_poly = kCosPoly[0];
-  for (std::size_t i = 1; i < kSinPoly.size(); ++i) {
-    sin_poly = madd(z, sin_poly, kSinPoly[i]);
-    cos_poly = madd(z, cos_poly, kCosPoly[i]);
-  }
-  const double sin_a = madd(a * z, sin_poly, a);
-  const double cos_a = madd(z, cos_poly, 1.0);
-  // Angle = quadrant * pi/2 + a.
-  const bool swap = (quadrant & 1u) != 0;
-  const double c = swap ? sin_a : cos_a;
-  const double s = swap ? cos_a : sin_a;
-  cos_out = ((quadrant + 1) & 2u) != 0 ? -c : c;  // quadrants 1, 2
-  sin_out = (quadrant & 2u) != 0 ? -s : s;        // quadrants 2, 3
-}
+using internal::log_positive;
+using internal::sincos_turns;
+using internal::sqrt_nonneg;
 
 // Box-Muller on two 64-bit draws (see the header).
 [[gnu::always_inline]] inline void box_muller(std::uint64_t a, std::uint64_t b, double& z0,
@@ -318,6 +216,26 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
   }
 }
 
+// The first two normals of the streams of particles first_particle .. first_particle + n - 1
+// (block 0 of each: its Box-Muller pair), n <= L, to z0[0 .. n) and z1[0 .. n).
+template <std::size_t L>
+[[gnu::noinline]] void pair_chunk(const KeyWords& kw, std::uint32_t first_particle, std::size_t n,
+                                  double* z0, double* z1) noexcept {
+  PhiloxLanes<L> lanes{};
+  for (std::size_t l = 0; l < L; ++l) {  // lanes past n are computed, not stored
+    lanes.x0[l] = 0;
+    lanes.x1[l] = (first_particle + l) & 0xFFFFFFFFu;
+  }
+  philox4x32_10_lanes(kw.key, kw.step_low, kw.step_high_purpose, lanes);
+  alignas(64) double v0[L];
+  alignas(64) double v1[L];
+  LanesToNormals{}(lanes, v0, v1);
+  for (std::size_t l = 0; l < n; ++l) {
+    z0[l] = v0[l];
+    z1[l] = v1[l];
+  }
+}
+
 }  // namespace
 
 std::array<double, 2> normal_pair_from_bits(std::uint64_t a, std::uint64_t b) noexcept {
@@ -428,6 +346,25 @@ void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purp
   assert(out.size() == count * per_particle && "out.size() must be count * per_particle");
   particle_blocks(key_words(seed, step, purpose), first_particle, count, per_particle, out.data(),
                   LanesToUniforms{});
+}
+
+void normal_pairs_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
+                                std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second) noexcept {
+  assert(first.size() >= count && second.size() >= count && "outputs must hold count values");
+  assert(std::uint64_t{first_particle} + count <= (std::uint64_t{1} << 32) &&
+         "first_particle + count must not exceed 2^32");
+  const KeyWords kw = key_words(seed, step, purpose);
+  std::size_t done = 0;
+  for (; count - done >= kLanes; done += kLanes) {
+    pair_chunk<kLanes>(kw, first_particle + static_cast<std::uint32_t>(done), kLanes,
+                       first.data() + done, second.data() + done);
+  }
+  for (; done < count; done += kTailLanes) {
+    const std::size_t n = std::min(kTailLanes, count - done);
+    pair_chunk<kTailLanes>(kw, first_particle + static_cast<std::uint32_t>(done), n,
+                           first.data() + done, second.data() + done);
+  }
 }
 
 }  // namespace fastslam::parallel

@@ -162,6 +162,15 @@ class RandomStream {
 void normals_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
                            std::uint32_t first_particle, std::size_t count,
                            std::size_t per_particle, std::span<double> out) noexcept;
+// The same for per_particle = 2, one column per draw: first[k] and second[k] are the first and
+// second normal() of particle first_particle + k's stream (the cos and sin halves of its first
+// Box-Muller pair), i.e. out[2k] and out[2k + 1] of normals_for_particles(..., 2, out). For
+// kernels that read the two normals of a particle block as separate columns (motion sampling).
+// REQUIRES: first.size() >= count, second.size() >= count; first_particle + count <= 2^32.
+// Costs: as normals_for_particles, without the interleaving.
+void normal_pairs_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
+                                std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second) noexcept;
 // The same for uniform(): out[k * per_particle + j] is the j-th uniform() of particle
 // first_particle + k's stream.
 void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
