@@ -211,12 +211,17 @@ struct Filter::Impl {
         }
       }
     } else {
-      for (std::size_t k = 0; k < k_steps; ++k) {
-        parallel::normal_pairs_for_particles(
-            config.seed, pending[k].step, parallel::Purpose::kMotion,
-            static_cast<std::uint32_t>(begin), count, {column(N + 2 * k), count},
-            {column(N + 2 * k + 1), count});
-      }
+      // The two motion normals of every particle and step: stream (seed, step, particle,
+      // kMotion), step k's pair in columns N + 2k and N + 2k + 1.
+      thread_local std::vector<std::uint64_t> keys;
+      keys.resize(k_steps);
+      for (std::size_t k = 0; k < k_steps; ++k) keys[k] = pending[k].step;
+      const std::span<double> normals(column(N), 2 * k_steps * lanes);
+      // Drawn for the padding lanes too (the streams of the particles after the block; their
+      // values go nowhere): whole vectors, no scalar remainder.
+      parallel::normal_pairs_for_particles(config.seed, keys, parallel::Purpose::kMotion,
+                                           static_cast<std::uint32_t>(begin), lanes, normals,
+                                           normals.subspan(lanes), 2 * lanes);
     }
     const std::size_t m = store.size();
     // Recording the trajectory needs the poses after every step; otherwise one call runs them all.

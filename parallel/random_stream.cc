@@ -216,23 +216,29 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
   }
 }
 
-// The first two normals of the streams of particles first_particle .. first_particle + n - 1
-// (block 0 of each: its Box-Muller pair), n <= L, to z0[0 .. n) and z1[0 .. n).
-template <std::size_t L>
-[[gnu::noinline]] void pair_chunk(const KeyWords& kw, std::uint32_t first_particle, std::size_t n,
-                                  double* z0, double* z1) noexcept {
-  PhiloxLanes<L> lanes{};
-  for (std::size_t l = 0; l < L; ++l) {  // lanes past n are computed, not stored
-    lanes.x0[l] = 0;
-    lanes.x1[l] = (first_particle + l) & 0xFFFFFFFFu;
-  }
-  philox4x32_10_lanes(kw.key, kw.step_low, kw.step_high_purpose, lanes);
-  alignas(64) double v0[L];
-  alignas(64) double v1[L];
-  LanesToNormals{}(lanes, v0, v1);
-  for (std::size_t l = 0; l < n; ++l) {
-    z0[l] = v0[l];
-    z1[l] = v1[l];
+// For each step j: the first Box-Muller pair (block 0) of the streams of particles
+// first_particle + k, k < n, to z0[j * stride + k] and z1[j * stride + k]. Philox and the
+// transform are fused in one loop over particles, which the compiler vectorises with the words
+// kept in registers; the constants are set up once for all steps.
+[[gnu::noinline]] void pair_run(std::uint64_t seed, std::span<const std::uint64_t> steps,
+                                Purpose purpose, std::uint32_t first_particle, std::size_t n,
+                                double* z0, double* z1, std::size_t stride) noexcept {
+  const internal::PhiloxRoundKeys keys =
+      internal::philox_round_keys(key_words(seed, 0, purpose).key);
+  for (std::size_t j = 0; j < steps.size(); ++j) {
+    const KeyWords kw = key_words(seed, steps[j], purpose);
+    const std::uint64_t c2 = kw.step_low;
+    const std::uint64_t c3 = kw.step_high_purpose;
+    double* out0 = z0 + j * stride;
+    double* out1 = z1 + j * stride;
+    for (std::size_t k = 0; k < n; ++k) {
+      std::uint64_t x0 = 0;
+      std::uint64_t x1 = (first_particle + k) & 0xFFFFFFFFu;
+      std::uint64_t x2 = c2;
+      std::uint64_t x3 = c3;
+      internal::philox4x32_10_words(keys, x0, x1, x2, x3);
+      box_muller(x0 | x1 << 32, x2 | x3 << 32, out0[k], out1[k]);
+    }
   }
 }
 
@@ -351,20 +357,21 @@ void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purp
 void normal_pairs_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
                                 std::uint32_t first_particle, std::size_t count,
                                 std::span<double> first, std::span<double> second) noexcept {
-  assert(first.size() >= count && second.size() >= count && "outputs must hold count values");
+  normal_pairs_for_particles(seed, std::span(&step, 1), purpose, first_particle, count, first,
+                             second, count);
+}
+
+void normal_pairs_for_particles(std::uint64_t seed, std::span<const std::uint64_t> steps,
+                                Purpose purpose, std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second,
+                                std::size_t stride) noexcept {
+  if (steps.empty() || count == 0) return;
+  assert(stride >= count && "stride must be at least count");
+  assert(first.size() >= (steps.size() - 1) * stride + count &&
+         second.size() >= (steps.size() - 1) * stride + count && "outputs too short");
   assert(std::uint64_t{first_particle} + count <= (std::uint64_t{1} << 32) &&
          "first_particle + count must not exceed 2^32");
-  const KeyWords kw = key_words(seed, step, purpose);
-  std::size_t done = 0;
-  for (; count - done >= kLanes; done += kLanes) {
-    pair_chunk<kLanes>(kw, first_particle + static_cast<std::uint32_t>(done), kLanes,
-                       first.data() + done, second.data() + done);
-  }
-  for (; done < count; done += kTailLanes) {
-    const std::size_t n = std::min(kTailLanes, count - done);
-    pair_chunk<kTailLanes>(kw, first_particle + static_cast<std::uint32_t>(done), n,
-                           first.data() + done, second.data() + done);
-  }
+  pair_run(seed, steps, purpose, first_particle, count, first.data(), second.data(), stride);
 }
 
 }  // namespace fastslam::parallel

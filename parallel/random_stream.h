@@ -167,10 +167,19 @@ void normals_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpo
 // Box-Muller pair), i.e. out[2k] and out[2k + 1] of normals_for_particles(..., 2, out). For
 // kernels that read the two normals of a particle block as separate columns (motion sampling).
 // REQUIRES: first.size() >= count, second.size() >= count; first_particle + count <= 2^32.
-// Costs: as normals_for_particles, without the interleaving.
+// Costs: O(count); Philox and Box-Muller fused in one vectorised loop over the particles.
 void normal_pairs_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
                                 std::uint32_t first_particle, std::size_t count,
                                 std::span<double> first, std::span<double> second) noexcept;
+// The same for several steps in one call: for each j, first[j * stride + k] and
+// second[j * stride + k] are the first two normals of the stream {seed, steps[j],
+// first_particle + k, purpose}. One call per particle block and scan covers every control.
+// REQUIRES: stride >= count; first and second hold (steps.size() - 1) * stride + count values;
+// first_particle + count <= 2^32.
+void normal_pairs_for_particles(std::uint64_t seed, std::span<const std::uint64_t> steps,
+                                Purpose purpose, std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second,
+                                std::size_t stride) noexcept;
 // The same for uniform(): out[k * per_particle + j] is the j-th uniform() of particle
 // first_particle + k's stream.
 void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
