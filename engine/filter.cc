@@ -61,6 +61,17 @@ struct PhaseTimes {
   double update = 0.0;
 };
 
+// Particles per task of a pass over m particles: at most `grain`, with the number of tasks a
+// multiple of the thread count and the tasks of nearly equal size, so that at the end of a
+// pass no thread waits long for another (M = 100, grain 16, 2 threads: 8 tasks of 13 rather
+// than 6 of 16 and one of 4, i.e. 52/48 particles per thread rather than 64/36 at worst).
+// Results never depend on it: each particle's work reads only its own state and streams.
+std::size_t pass_block_size(std::size_t m, unsigned threads, std::size_t grain) {
+  std::size_t tasks = (m + grain - 1) / grain;
+  if (threads > 1) tasks = (tasks + threads - 1) / threads * threads;
+  return std::max<std::size_t>(1, (m + tasks - 1) / tasks);
+}
+
 }  // namespace
 
 struct Filter::Impl {
@@ -133,34 +144,39 @@ struct Filter::Impl {
       recorded.assign(pending.size() * m * 4, 0.0);
       snapshot_weights();
     }
-    kernel.for_each_block(store.size(), [&](std::size_t begin, std::size_t end) {
-      const Clock::time_point t0 = Clock::now();
-      const std::size_t count = end - begin;
-      if (!pending.empty()) {
-        advance_block(motion, begin, count, record ? recorded.data() : nullptr);
-      }
-      const Clock::time_point t1 = Clock::now();
-      if (scan != nullptr) {
-        // FastSLAM 2.0: the N normals of each particle's pose draw, stream (seed, scan step,
-        // particle, kProposal), for the whole block in one vectorised batch (the same values
-        // as per-particle streams, at a fraction of the cost).
-        thread_local std::vector<double> draws;
-        if (fs2) {
-          draws.resize(static_cast<std::size_t>(N) * count);
-          parallel::normals_for_particles(seed, scan_step, parallel::Purpose::kProposal,
-                                          static_cast<std::uint32_t>(begin), count, N, draws);
-        }
-        for (std::size_t i = begin; i < end; ++i) {
-          update_particle<Motion>(i, load(i), *scan, scan_step,
-                                  fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr,
-                                  log_weight, save, cov_of);
-        }
-      }
-      const Clock::time_point t2 = Clock::now();
-      PhaseTimes& times = phase_times.local();
-      times.predict += seconds_between(t0, t1);
-      times.update += seconds_between(t1, t2);
-    });
+    const std::size_t block_size = pass_block_size(m, kernel.threads(), config.grain);
+    kernel.for_each_block(
+        m,
+        [&](std::size_t begin, std::size_t end) {
+          const Clock::time_point t0 = Clock::now();
+          const std::size_t count = end - begin;
+          if (!pending.empty()) {
+            advance_block(motion, begin, count, record ? recorded.data() : nullptr);
+          }
+          const Clock::time_point t1 = Clock::now();
+          if (scan != nullptr) {
+            // FastSLAM 2.0: the N normals of each particle's pose draw, stream (seed, scan step,
+            // particle, kProposal), for the whole block in one vectorised batch (the same values
+            // as per-particle streams, at a fraction of the cost).
+            thread_local std::vector<double> draws;
+            if (fs2) {
+              draws.resize(static_cast<std::size_t>(N) * count);
+              parallel::normals_for_particles(seed, scan_step, parallel::Purpose::kProposal,
+                                              static_cast<std::uint32_t>(begin), count, N, draws);
+            }
+            for (std::size_t i = begin; i < end; ++i) {
+              update_particle<Motion>(
+                  i, load(i), *scan, scan_step,
+                  fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
+                  save, cov_of);
+            }
+          }
+          const Clock::time_point t2 = Clock::now();
+          PhaseTimes& times = phase_times.local();
+          times.predict += seconds_between(t0, t1);
+          times.update += seconds_between(t1, t2);
+        },
+        block_size);
     if (record) reduce_recorded(m);
   }
 
@@ -180,17 +196,22 @@ struct Filter::Impl {
     const std::size_t lanes = padded_lanes(count);
     const std::size_t k_steps = pending.size();
     // Columns: N states, then (FastSLAM 2.0) E covariance entries or (FastSLAM 1.0) two normals
-    // per control step.
+    // per control step of a batch of at most kStepBatch steps (bounds the scratch when many
+    // controls are queued).
+    constexpr std::size_t kStepBatch = 64;
     thread_local std::vector<double> scratch;
     thread_local std::vector<ControlStep> steps;
-    const std::size_t columns = N + (fs2 ? E : 2 * k_steps);
-    scratch.assign(columns * lanes, 0.0);
+    thread_local std::vector<std::uint64_t> keys;
+    const std::size_t columns = N + (fs2 ? E : 2 * std::min(k_steps, kStepBatch));
+    scratch.resize(columns * lanes);
     auto column = [&](std::size_t c) { return scratch.data() + c * lanes; };
     steps.resize(k_steps);
+    keys.resize(k_steps);
     for (std::size_t k = 0; k < k_steps; ++k) {
       const PendingControl& c = pending[k];
       steps[k] = {c.u0, c.u1, c.dt};
       if constexpr (std::is_same_v<Motion, BrownianVelocityModel>) steps[k].u0 = steps[k].u1 = 0;
+      keys[k] = c.step;
     }
     double* const store_col[5] = {store.x().data(), store.y().data(), store.theta().data(),
                                   store.v().data(), store.omega().data()};
@@ -199,6 +220,7 @@ struct Filter::Impl {
     for (int k = 0; k < N; ++k) {
       block.col[k] = column(k);
       std::copy_n(store_col[k] + begin, count, block.col[k]);
+      std::fill(block.col[k] + count, block.col[k] + lanes, 0.0);  // padding lanes: any finite
     }
     CovBlock<N> cov{};
     if (fs2) {
@@ -208,37 +230,40 @@ struct Filter::Impl {
           for (std::size_t l = 0; l < count; ++l) {
             cov[e][l] = pose_cov[(begin + l) * 25 + c * N + row];
           }
+          std::fill(cov[e] + count, cov[e] + lanes, 0.0);
         }
       }
-    } else {
-      // The two motion normals of every particle and step: stream (seed, step, particle,
-      // kMotion), step k's pair in columns N + 2k and N + 2k + 1.
-      thread_local std::vector<std::uint64_t> keys;
-      keys.resize(k_steps);
-      for (std::size_t k = 0; k < k_steps; ++k) keys[k] = pending[k].step;
-      const std::span<double> normals(column(N), 2 * k_steps * lanes);
-      // Drawn for the padding lanes too (the streams of the particles after the block; their
-      // values go nowhere): whole vectors, no scalar remainder.
-      parallel::normal_pairs_for_particles(config.seed, keys, parallel::Purpose::kMotion,
-                                           static_cast<std::uint32_t>(begin), lanes, normals,
-                                           normals.subspan(lanes), 2 * lanes);
     }
     const std::size_t m = store.size();
-    // Recording the trajectory needs the poses after every step; otherwise one call runs them all.
-    const std::size_t per_call = recorded_out != nullptr ? 1 : k_steps;
-    for (std::size_t k = 0; k < k_steps; k += per_call) {
-      const std::span<const ControlStep> run(steps.data() + k, per_call);
-      if (fs2) {
-        predict_block(motion, block, run, sigmas, cov);
-      } else {
-        sample_block(motion, block, run, sigmas, column(N + 2 * k));
+    // Recording the trajectory needs the poses after every step; otherwise one call runs a batch.
+    const std::size_t per_call = recorded_out != nullptr ? 1 : kStepBatch;
+    for (std::size_t first = 0; first < k_steps; first += kStepBatch) {
+      const std::size_t batch = std::min(kStepBatch, k_steps - first);
+      if (!fs2) {
+        // The two motion normals of every particle and step: stream (seed, step, particle,
+        // kMotion), step first + j's pair in columns N + 2j and N + 2j + 1. Drawn for the
+        // padding lanes too (the streams of the particles after the block; their values go
+        // nowhere): whole vectors, no scalar remainder.
+        const std::span<double> normals(column(N), 2 * batch * lanes);
+        parallel::normal_pairs_for_particles(
+            config.seed, std::span(keys).subspan(first, batch), parallel::Purpose::kMotion,
+            static_cast<std::uint32_t>(begin), lanes, normals, normals.subspan(lanes), 2 * lanes);
       }
-      if (recorded_out != nullptr) {
-        for (std::size_t l = 0; l < count; ++l) {
-          double* out = &recorded_out[(k * m + begin + l) * 4];
-          out[0] = block.col[0][l];
-          out[1] = block.col[1][l];
-          parallel::internal::sincos(block.col[2][l], out[2], out[3]);
+      for (std::size_t j = 0; j < batch; j += per_call) {
+        const std::size_t k = first + j;
+        const std::span<const ControlStep> run(steps.data() + k, std::min(per_call, batch - j));
+        if (fs2) {
+          predict_block(motion, block, run, sigmas, cov);
+        } else {
+          sample_block(motion, block, run, sigmas, column(N + 2 * j));
+        }
+        if (recorded_out != nullptr) {
+          for (std::size_t l = 0; l < count; ++l) {
+            double* out = &recorded_out[(k * m + begin + l) * 4];
+            out[0] = block.col[0][l];
+            out[1] = block.col[1][l];
+            parallel::internal::sincos(block.col[2][l], out[2], out[3]);
+          }
         }
       }
     }
