@@ -17,10 +17,13 @@
 // (tests/engine/motion_batch_test.cc bounds the difference by 1e-12 of the state's scale for
 // every model). Headings are wrapped to (-pi, pi] exactly as wrap_angle does.
 //
-// Determinism: a lane's result is a function of that lane's inputs alone, computed by the same
-// instructions whatever the block size and the lane's position in it (blocks are processed in
-// whole groups of kMotionLanes lanes, never by a scalar remainder loop), so a filter run is
-// bit-identical for any blocking and thread count. Lanes outside the vector path's domain (an
+// Determinism: a lane's result is a function of that lane's inputs alone, whatever the block
+// size and the lane's position in it, so a filter run is bit-identical for any blocking and
+// thread count. Two things ensure it: lanes come in whole groups of kMotionLanes (the vector
+// loops have no remainder at AVX-512 or AVX2 widths), and the arithmetic follows vmath.h's
+// rule (every multiply-add an explicit madd, no other product feeding an addition), so that
+// even a scalar execution of a lane gives the vector bits (motion_batch_test runs particles
+// alone, in blocks and reordered, and compares bits). Lanes outside the vector path's domain (an
 // angle argument beyond vmath's kSinCosMaxArg = 2^20 rad, a heading beyond about 3 pi after
 // the step, a non-finite value) are recomputed by the scalar model; whether a lane takes that
 // path also depends on its inputs alone.
