@@ -61,16 +61,28 @@ struct PhaseTimes {
   double update = 0.0;
 };
 
-// Particles per task of a pass over m particles: at most `grain`, with the number of tasks a
-// multiple of the thread count and the tasks of nearly equal size, so that at the end of a
-// pass no thread waits long for another (M = 100, grain 16, 2 threads: 8 tasks of 13 rather
-// than 6 of 16 and one of 4, i.e. 52/48 particles per thread rather than 64/36 at worst).
-// Results never depend on it: each particle's work reads only its own state and streams.
-std::size_t pass_block_size(std::size_t m, unsigned threads, std::size_t grain) {
-  std::size_t tasks = (m + grain - 1) / grain;
-  if (threads > 1) tasks = (tasks + threads - 1) / threads * threads;
-  return std::max<std::size_t>(1, (m + tasks - 1) / tasks);
-}
+// The particle blocks of a pass over m particles: whole groups of kMotionLanes particles (the
+// vector width of the control loop, and one 64-byte cache line of a column, so no two tasks
+// write the same line), dealt to `tasks` blocks that differ by at most one group. There are
+// about m / grain tasks, rounded up to a multiple of the thread count so that at the end of a
+// pass no thread waits long for another (M = 100, grain 16, 2 threads: 8 blocks of 8 or 16
+// particles, 48/52 per thread when split evenly; blocks of exactly 16 would give 6 blocks and
+// a block of 4, 64/36 at worst). Results never depend on the blocks: each particle's work
+// reads only its own state and streams.
+struct PassBlocks {
+  std::size_t m = 0;
+  std::size_t groups = 0;
+  std::size_t tasks = 0;
+
+  PassBlocks(std::size_t particles, unsigned threads, std::size_t grain)
+      : m(particles), groups((particles + kMotionLanes - 1) / kMotionLanes) {
+    tasks = (particles + grain - 1) / grain;
+    if (threads > 1) tasks = (tasks + threads - 1) / threads * threads;
+    tasks = std::clamp<std::size_t>(tasks, 1, std::max<std::size_t>(groups, 1));
+  }
+  // First particle of block t (t <= tasks; block t is [begin(t), begin(t + 1))).
+  std::size_t begin(std::size_t t) const { return std::min(m, t * groups / tasks * kMotionLanes); }
+};
 
 }  // namespace
 
@@ -144,39 +156,37 @@ struct Filter::Impl {
       recorded.assign(pending.size() * m * 4, 0.0);
       snapshot_weights();
     }
-    const std::size_t block_size = pass_block_size(m, kernel.threads(), config.grain);
-    kernel.for_each_block(
-        m,
-        [&](std::size_t begin, std::size_t end) {
-          const Clock::time_point t0 = Clock::now();
-          const std::size_t count = end - begin;
-          if (!pending.empty()) {
-            advance_block(motion, begin, count, record ? recorded.data() : nullptr);
-          }
-          const Clock::time_point t1 = Clock::now();
-          if (scan != nullptr) {
-            // FastSLAM 2.0: the N normals of each particle's pose draw, stream (seed, scan step,
-            // particle, kProposal), for the whole block in one vectorised batch (the same values
-            // as per-particle streams, at a fraction of the cost).
-            thread_local std::vector<double> draws;
-            if (fs2) {
-              draws.resize(static_cast<std::size_t>(N) * count);
-              parallel::normals_for_particles(seed, scan_step, parallel::Purpose::kProposal,
-                                              static_cast<std::uint32_t>(begin), count, N, draws);
-            }
-            for (std::size_t i = begin; i < end; ++i) {
-              update_particle<Motion>(
-                  i, load(i), *scan, scan_step,
-                  fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
-                  save, cov_of);
-            }
-          }
-          const Clock::time_point t2 = Clock::now();
-          PhaseTimes& times = phase_times.local();
-          times.predict += seconds_between(t0, t1);
-          times.update += seconds_between(t1, t2);
-        },
-        block_size);
+    const PassBlocks blocks(m, kernel.threads(), config.grain);
+    auto run_block = [&](std::size_t begin, std::size_t end) {
+      const Clock::time_point t0 = Clock::now();
+      const std::size_t count = end - begin;
+      if (!pending.empty()) {
+        advance_block(motion, begin, count, record ? recorded.data() : nullptr);
+      }
+      const Clock::time_point t1 = Clock::now();
+      if (scan != nullptr) {
+        // FastSLAM 2.0: the N normals of each particle's pose draw, stream (seed, scan step,
+        // particle, kProposal), for the whole block in one vectorised batch (the same values
+        // as per-particle streams, at a fraction of the cost).
+        thread_local std::vector<double> draws;
+        if (fs2) {
+          draws.resize(static_cast<std::size_t>(N) * count);
+          parallel::normals_for_particles(seed, scan_step, parallel::Purpose::kProposal,
+                                          static_cast<std::uint32_t>(begin), count, N, draws);
+        }
+        for (std::size_t i = begin; i < end; ++i) {
+          update_particle<Motion>(i, load(i), *scan, scan_step,
+                                  fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr,
+                                  log_weight, save, cov_of);
+        }
+      }
+      const Clock::time_point t2 = Clock::now();
+      PhaseTimes& times = phase_times.local();
+      times.predict += seconds_between(t0, t1);
+      times.update += seconds_between(t1, t2);
+    };
+    kernel.for_each_particle(
+        blocks.tasks, [&](std::size_t t) { run_block(blocks.begin(t), blocks.begin(t + 1)); }, 1);
     if (record) reduce_recorded(m);
   }
 

@@ -36,19 +36,21 @@ constexpr std::size_t kLanes = 16;
 constexpr std::size_t kTailLanes = 4;
 
 // ---------------------------------------------------------------------------------------------
-// Floating point: log, sqrt and sin/cos of parallel/internal/vmath.h, written so that the scalar
-// and the vectorised paths give the same bits (see there). random_stream_test checks the
-// composite Box-Muller pair (within 8 ulp of max(r, 1); measured 1.4).
+// Floating point: log and sin/cos of parallel/internal/vmath.h, written so that the scalar and
+// the vectorised paths give the same bits (see there), and std::sqrt, correctly rounded, which
+// this file's -fno-math-errno (parallel/CMakeLists.txt) turns into one instruction in both
+// paths (with errno semantics it would not vectorise; the argument is never negative anyway,
+// so errno is never set). random_stream_test checks the composite Box-Muller pair (within 8
+// ulp of max(r, 1); measured 1.4).
 
 using internal::log_positive;
 using internal::sincos_turns;
-using internal::sqrt_nonneg;
 
 // Box-Muller on two 64-bit draws (see the header).
 [[gnu::always_inline]] inline void box_muller(std::uint64_t a, std::uint64_t b, double& z0,
                                               double& z1) noexcept {
   const double u = static_cast<double>(static_cast<std::int64_t>((a >> 11) + 1)) * 0x1p-53;
-  const double radius = sqrt_nonneg(-2.0 * log_positive(u));
+  const double radius = std::sqrt(-2.0 * log_positive(u));
   double c = 0.0;
   double s = 0.0;
   sincos_turns(static_cast<double>(static_cast<std::int64_t>(b >> 11)), c, s);

@@ -1,21 +1,20 @@
-// Vectorisable elementary functions (log, sqrt, sin, cos) for the batch kernels of
+// Vectorisable elementary functions (log, sin, cos) for the batch kernels of
 // parallel/random_stream.cc and engine/motion_batch.h. Not API.
 //
-// Why not libm: glibc's scalar and vector (libmvec) functions need not agree bit for bit, sqrt
-// under -fmath-errno (GCC's default) blocks vectorisation, and a call per element stops a loop
-// over particles from vectorising at all. These are plain inline functions of IEEE-754 +, -, *,
-// / and fma, so a loop over lanes that calls them vectorises (g++ -O3, SSE2 to AVX-512), and the
-// scalar and the vector forms give the same bits: every multiply-add is an explicit `madd`
-// (one fma where the target has a fast fma, FP_FAST_FMA, else a * b + c, which the compiler then
-// cannot contract either), and no other product feeds an addition, so -ffp-contract has nothing
-// left to fuse. Results do depend on whether the build target has a fast fma (the last bit may
-// differ between an FMA build and a generic x86-64 one), never on the C library.
+// Why not libm: glibc's scalar and vector (libmvec) functions need not agree bit for bit, and a
+// call per element stops a loop over particles from vectorising at all. These are plain inline
+// functions of IEEE-754 +, -, *, / and fma, so a loop over lanes that calls them vectorises
+// (g++ -O3, SSE2 to AVX-512), and the scalar and the vector forms give the same bits: every
+// multiply-add is an explicit `madd` (one fma where the target has a fast fma, FP_FAST_FMA,
+// else a * b + c, which the compiler then cannot contract either), and no other product feeds
+// an addition, so -ffp-contract has nothing left to fuse. Results do depend on whether the
+// build target has a fast fma (the last bit may differ between an FMA build and a generic
+// x86-64 one), never on the C library. (For a square root, use std::sqrt in a file compiled
+// with -fno-math-errno: correctly rounded, one instruction, vectorised.)
 //
 // Accuracy (measured against long-double libm; tests/parallel/internal/vmath_test.cc asserts
 // the bounds in brackets):
 //   log_positive(x)   positive normal x: below 0.75 ulp [1 ulp].
-//   sqrt_nonneg(v)    0 <= v < 2^1000: at most one ulp from the correctly rounded sqrt, usually
-//                     equal to it [1 ulp].
 //   sincos_turns(t)   cos and sin of 2 pi t 2^-53 for integer t in [0, 2^53): absolute error
 //                     below 1.4 * 2^-53 [1.5 * 2^-53]; exact quadrant (no reduction error).
 //   sincos(x)         cos and sin of x for |x| <= kSinCosMaxArg = 2^20: absolute error below
@@ -74,18 +73,6 @@ namespace fastslam::parallel::internal {
   const double inner = madd(s, madd(hf, f, r), dk * kLn2Lo);  // s (f^2/2 + R) + k ln2_lo
   const double tail = madd(hf, f, -inner);                    // f^2/2 - inner
   return madd(dk, kLn2Hi, f - tail);
-}
-
-// sqrt(v) for 0 <= v < 2^1000: reciprocal square root y by Newton from the bit-level first
-// guess (relative error 3.5e-2, then 1.8e-3, 4.7e-6, 3.3e-11), then one Newton step on s = v y,
-// which squares the error to ~1e-21 before rounding: error 0.5 ulp (measured; not proven
-// correctly rounded); sqrt(0) = 0.
-[[gnu::always_inline]] inline double sqrt_nonneg(double v) noexcept {
-  const double h = 0.5 * v;
-  double y = std::bit_cast<double>(0x5FE6EB50C7B537A9u - (std::bit_cast<std::uint64_t>(v) >> 1));
-  for (int i = 0; i < 3; ++i) y = y * madd(-(h * y), y, 1.5);
-  const double s = v * y;
-  return madd(madd(-s, s, v), 0.5 * y, s);  // s + (v - s^2) / (2 sqrt(v))
 }
 
 namespace vmath_detail {

@@ -1,4 +1,4 @@
-// Tests of parallel/internal/vmath.h: accuracy of log, sqrt, sin and cos against long-double
+// Tests of parallel/internal/vmath.h: accuracy of log, sin and cos against long-double
 // libm over wide ranges (including large angles and arguments next to multiples of pi/2), and
 // bit equality of the vectorised and the scalar forms (a loop the compiler vectorises against
 // calls through a function it cannot inline).
@@ -147,48 +147,31 @@ TEST(VmathLog, WithinOneUlpOverManyBinades) {
   EXPECT_EQ(log_positive(1.0), 0.0);
 }
 
-TEST(VmathSqrt, WithinOneUlp) {
-  std::mt19937_64 rng(9);
-  std::uniform_real_distribution<double> exponent(-600.0, 600.0);
-  double worst_ulps = 0.0;
-  for (std::size_t i = 0; i < kDraws; ++i) {
-    const double v = std::exp2(exponent(rng));
-    const double ref = std::sqrt(v);  // correctly rounded
-    const double ulp = std::fabs(std::nextafter(ref, 1e300) - ref);
-    worst_ulps = std::max(worst_ulps, std::fabs(sqrt_nonneg(v) - ref) / ulp);
-  }
-  EXPECT_LE(worst_ulps, 1.0);  // at most one ulp from the correctly rounded result
-  EXPECT_EQ(sqrt_nonneg(0.0), 0.0);
-  EXPECT_EQ(sqrt_nonneg(4.0), 2.0);
-}
-
 // The scalar forms, through a function the compiler may not inline into a vectorised loop.
-[[gnu::noinline]] void scalar_all(double x, double out[5]) {
+[[gnu::noinline]] void scalar_all(double x, double out[4]) {
   sincos(x, out[0], out[1]);
   out[2] = log_positive(std::fabs(x) + 1e-3);
-  out[3] = sqrt_nonneg(std::fabs(x));
   double c = 0.0;
   double s = 0.0;
   sincos_turns(std::fabs(std::floor(x * 1e9)), c, s);
-  out[4] = c + s;
+  out[3] = c + s;
 }
 
 TEST(Vmath, VectorisedLoopsGiveTheScalarBits) {
   const std::vector<double> xs = uniform_draws(-3000.0, 3000.0, 13);
-  std::vector<double> c(xs.size()), s(xs.size()), lg(xs.size()), sq(xs.size()), tr(xs.size());
+  std::vector<double> c(xs.size()), s(xs.size()), lg(xs.size()), tr(xs.size());
   for (std::size_t i = 0; i < xs.size(); ++i) {  // vectorised at -O3
     sincos(xs[i], c[i], s[i]);
     lg[i] = log_positive(std::fabs(xs[i]) + 1e-3);
-    sq[i] = sqrt_nonneg(std::fabs(xs[i]));
     double tc = 0.0;
     double ts = 0.0;
     sincos_turns(std::fabs(std::floor(xs[i] * 1e9)), tc, ts);
     tr[i] = tc + ts;
   }
   for (std::size_t i = 0; i < xs.size(); ++i) {
-    double ref[5];
+    double ref[4];
     scalar_all(xs[i], ref);
-    const double got[5] = {c[i], s[i], lg[i], sq[i], tr[i]};
+    const double got[4] = {c[i], s[i], lg[i], tr[i]};
     ASSERT_EQ(std::memcmp(got, ref, sizeof(got)), 0) << "x = " << xs[i];
   }
 }
