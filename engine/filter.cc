@@ -65,10 +65,10 @@ struct PhaseTimes {
 // vector width of the control loop, and one 64-byte cache line of a column, so no two tasks
 // write the same line), dealt to `tasks` blocks that differ by at most one group. There are
 // about m / grain tasks, rounded up to a multiple of the thread count so that at the end of a
-// pass no thread waits long for another (M = 100, grain 16, 2 threads: 8 blocks of 8 or 16
-// particles, 48/52 per thread when split evenly; blocks of exactly 16 would give 6 blocks and
-// a block of 4, 64/36 at worst). Results never depend on the blocks: each particle's work
-// reads only its own state and streams.
+// pass no thread waits long for another (M = 100, 2 threads: grain 64 gives 2 blocks of 48 and
+// 52 particles; grain 16 gives 8 blocks of 8 or 16, where blocks of exactly 16 would give 6 and
+// a block of 4, 64/36 per thread at worst). Results never depend on the blocks: each
+// particle's work reads only its own state and streams.
 struct PassBlocks {
   std::size_t m = 0;
   std::size_t groups = 0;
@@ -90,7 +90,10 @@ struct Filter::Impl {
   explicit Impl(const FilterConfig& c)
       : config(checked(c)),
         kernel({c.threads, c.grain}),
-        resampler(c.resample, kernel),
+        // Resampling costs nanoseconds per particle: its own grain (the kernel's default, 512,
+        // measured best for it), so that small filters resample inline instead of paying a
+        // parallel dispatch per scan. The result does not depend on it.
+        resampler(c.resample, kernel, parallel::KernelConfig{}.grain),
         store(c.particles, heap),
         pose_cov(static_cast<std::size_t>(c.particles) * 25, 0.0),
         sensor(c.sensor.offset) {
