@@ -90,9 +90,10 @@ using parallel::internal::sincos_in_domain;
 // less than 2 pi), with the same result bits; `ok` turns false when a is beyond that (the lane
 // then takes the scalar path, whose wrap_angle handles any angle).
 [[gnu::always_inline]] inline double wrap_near(double a, bool& ok) noexcept {
-  const double down = a - kTwoPi;  // both shifts computed unconditionally: selects, no branches
-  const double up = a + kTwoPi;
-  const double r = a > kPi ? down : (a <= -kPi ? up : a);
+  // The shift is a select between constants and the subtraction unconditional, so that the
+  // loop if-converts without masked stores (AVX2 too): a - 0 == a, a - (-2 pi) == a + 2 pi.
+  const double shift = (a > kPi ? kTwoPi : 0.0) - (a <= -kPi ? kTwoPi : 0.0);
+  const double r = a - shift;
   ok = ok & (r > -kPi) & (r <= kPi);
   return r;
 }
@@ -343,24 +344,25 @@ void sample_block(const Model& model, const StateBlock<Model::kStateDim>& block,
   using motion_batch_internal::kChunk;
   using motion_batch_internal::madd;
   constexpr int N = Model::kStateDim;
+  using Rows = double[N][kChunk];
   const double sigma0 = sigmas[0], sigma1 = sigmas[1];
   const std::size_t lanes = block.lanes;
   for (std::size_t first = 0; first < lanes; first += kChunk) {
     const std::size_t n = std::min(kChunk, lanes - first);
-    alignas(64) double buffers[2][N][kChunk];
+    // Two distinct arrays, the step alternating between them (a step needs its inputs intact
+    // for the scalar fallback): the vectoriser sees that input and output never alias.
+    alignas(64) Rows even;
+    alignas(64) Rows odd;
     alignas(64) std::int64_t bad[kChunk];
-    auto* cur = &buffers[0];
-    auto* next = &buffers[1];
 #pragma GCC unroll 8
     for (int k = 0; k < N; ++k) {
-      for (std::size_t l = 0; l < n; ++l) (*cur)[k][l] = block.col[k][first + l];
+      for (std::size_t l = 0; l < n; ++l) even[k][l] = block.col[k][first + l];
     }
-    for (std::size_t step = 0; step < steps.size(); ++step) {
+    auto step_once = [&](const Rows& in, Rows& out, std::size_t step)
+        __attribute__((always_inline)) {
       const ControlStep c = steps[step];
       const double* n0 = normals + 2 * step * lanes + first;
       const double* n1 = n0 + lanes;
-      double(&in)[N][kChunk] = *cur;
-      double(&out)[N][kChunk] = *next;
       for (std::size_t l = 0; l < n; ++l) {
         double s[N];
 #pragma GCC unroll 8
@@ -384,11 +386,18 @@ void sample_block(const Model& model, const StateBlock<Model::kStateDim>& block,
           for (int k = 0; k < N; ++k) out[k][l] = moved[k];
         }
       }
-      std::swap(cur, next);
+    };
+    for (std::size_t step = 0; step < steps.size(); ++step) {
+      if (step % 2 == 0) {
+        step_once(even, odd, step);
+      } else {
+        step_once(odd, even, step);
+      }
     }
+    const Rows& result = steps.size() % 2 == 0 ? even : odd;
 #pragma GCC unroll 8
     for (int k = 0; k < N; ++k) {
-      for (std::size_t l = 0; l < n; ++l) block.col[k][first + l] = (*cur)[k][l];
+      for (std::size_t l = 0; l < n; ++l) block.col[k][first + l] = result[k][l];
     }
   }
 }
@@ -407,24 +416,23 @@ void predict_block(const Model& model, const StateBlock<Model::kStateDim>& block
   constexpr int N = Model::kStateDim;
   constexpr int E = kCovEntries<N>;
   constexpr std::size_t T = L::kJacobianPattern.size();
+  using Rows = double[N + E][kChunk];  // states, then covariance entries
   const double m0 = sigmas[0] * sigmas[0], m1 = sigmas[1] * sigmas[1];
   for (std::size_t first = 0; first < block.lanes; first += kChunk) {
     const std::size_t n = std::min(kChunk, block.lanes - first);
-    alignas(64) double buffers[2][N + E][kChunk];  // states, then covariance entries
+    alignas(64) Rows even;  // as in sample_block
+    alignas(64) Rows odd;
     alignas(64) std::int64_t bad[kChunk];
-    auto* cur = &buffers[0];
-    auto* next = &buffers[1];
 #pragma GCC unroll 8
     for (int k = 0; k < N; ++k) {
-      for (std::size_t l = 0; l < n; ++l) (*cur)[k][l] = block.col[k][first + l];
+      for (std::size_t l = 0; l < n; ++l) even[k][l] = block.col[k][first + l];
     }
 #pragma GCC unroll 16
     for (int e = 0; e < E; ++e) {
-      for (std::size_t l = 0; l < n; ++l) (*cur)[N + e][l] = cov[e][first + l];
+      for (std::size_t l = 0; l < n; ++l) even[N + e][l] = cov[e][first + l];
     }
-    for (const ControlStep& c : steps) {
-      double(&in)[N + E][kChunk] = *cur;
-      double(&out)[N + E][kChunk] = *next;
+    auto step_once = [&](const Rows& in, Rows& out, const ControlStep& c)
+        __attribute__((always_inline)) {
       for (std::size_t l = 0; l < n; ++l) {
         double s[N];
 #pragma GCC unroll 8
@@ -471,15 +479,22 @@ void predict_block(const Model& model, const StateBlock<Model::kStateDim>& block
           }
         }
       }
-      std::swap(cur, next);
+    };
+    for (std::size_t step = 0; step < steps.size(); ++step) {
+      if (step % 2 == 0) {
+        step_once(even, odd, steps[step]);
+      } else {
+        step_once(odd, even, steps[step]);
+      }
     }
+    const Rows& result = steps.size() % 2 == 0 ? even : odd;
 #pragma GCC unroll 8
     for (int k = 0; k < N; ++k) {
-      for (std::size_t l = 0; l < n; ++l) block.col[k][first + l] = (*cur)[k][l];
+      for (std::size_t l = 0; l < n; ++l) block.col[k][first + l] = result[k][l];
     }
 #pragma GCC unroll 16
     for (int e = 0; e < E; ++e) {
-      for (std::size_t l = 0; l < n; ++l) cov[e][first + l] = (*cur)[N + e][l];
+      for (std::size_t l = 0; l < n; ++l) cov[e][first + l] = result[N + e][l];
     }
   }
 }

@@ -96,6 +96,22 @@ constexpr std::array<double, 8> taylor(int first_odd_or_even) {
 inline constexpr std::array<double, 8> kSinPoly = taylor(1);
 inline constexpr std::array<double, 8> kCosPoly = taylor(0);
 
+// cos and sin of quadrant * pi/2 + a from sin a and cos a: a swap for odd quadrants and sign
+// flips, done on the bits (masks, xor of the sign bit) rather than with conditional
+// expressions, which GCC may turn into branches around the polynomial that only one side uses
+// (then a loop no longer if-converts without AVX-512's masked operations).
+[[gnu::always_inline]] inline void apply_quadrant(double sin_a, double cos_a,
+                                                  std::uint64_t quadrant, double& cos_out,
+                                                  double& sin_out) noexcept {
+  const std::uint64_t swap = std::uint64_t{0} - (quadrant & 1u);  // all ones in odd quadrants
+  const auto sin_bits = std::bit_cast<std::uint64_t>(sin_a);
+  const auto cos_bits = std::bit_cast<std::uint64_t>(cos_a);
+  const std::uint64_t c = (sin_bits & swap) | (cos_bits & ~swap);
+  const std::uint64_t s = (cos_bits & swap) | (sin_bits & ~swap);
+  cos_out = std::bit_cast<double>(c ^ (((quadrant + 1) & 2u) << 62));  // negative in 1, 2
+  sin_out = std::bit_cast<double>(s ^ ((quadrant & 2u) << 62));        // negative in 2, 3
+}
+
 // cos and sin of quadrant * pi/2 + a for a in [-pi/4, pi/4] (slightly beyond is fine).
 [[gnu::always_inline]] inline void sincos_quadrant(double a, std::uint64_t quadrant,
                                                    double& cos_out, double& sin_out) noexcept {
@@ -109,11 +125,7 @@ inline constexpr std::array<double, 8> kCosPoly = taylor(0);
   }
   const double sin_a = madd(a * z, sin_poly, a);
   const double cos_a = madd(z, cos_poly, 1.0);
-  const bool swap = (quadrant & 1u) != 0;
-  const double c = swap ? sin_a : cos_a;
-  const double s = swap ? cos_a : sin_a;
-  cos_out = ((quadrant + 1) & 2u) != 0 ? -c : c;  // quadrants 1, 2
-  sin_out = (quadrant & 2u) != 0 ? -s : s;        // quadrants 2, 3
+  apply_quadrant(sin_a, cos_a, quadrant, cos_out, sin_out);
 }
 
 }  // namespace vmath_detail
@@ -164,11 +176,7 @@ inline constexpr std::array<double, 6> kCosMinimax = {
   }
   const double sin_a = madd(a * z, sin_poly, a);
   const double cos_a = madd(z, madd(z, cos_poly, -0.5), 1.0);
-  const bool swap = (quadrant & 1u) != 0;
-  const double c = swap ? sin_a : cos_a;
-  const double s = swap ? cos_a : sin_a;
-  cos_out = ((quadrant + 1) & 2u) != 0 ? -c : c;
-  sin_out = (quadrant & 2u) != 0 ? -s : s;
+  apply_quadrant(sin_a, cos_a, quadrant, cos_out, sin_out);
 }
 
 }  // namespace vmath_detail
