@@ -19,9 +19,9 @@ namespace fastslam::engine {
 
 enum class Algorithm : std::uint8_t { kFastSlam1, kFastSlam2 };
 enum class Association : std::uint8_t {
-  kKnown,                    // observations carry the landmark id (simulations, ground-truth tests)
-  kMaximumLikelihood,        // eq. 64 (unknown association issue)
-  kDataAssociationSampling,  // eq. 65 (unknown association issue)
+  kKnown,  // observations carry the landmark id (simulations, ground-truth tests)
+  kMaximumLikelihood,          // eq. 64 (unknown association issue)
+  kDataAssociationSampling,    // eq. 65 (unknown association issue)
 };
 enum class MotionKind : std::uint8_t {
   kBaileyCar,     // control (V, G): speed and steering from the heading; Bailey's simulator
@@ -32,8 +32,8 @@ enum class MotionKind : std::uint8_t {
 
 struct MotionConfig {
   MotionKind kind = MotionKind::kBaileyCar;
-  double wheelbase = 4.0;         // kBaileyCar
-  VictoriaParkGeometry geometry;  // kVictoriaPark
+  double wheelbase = 4.0;           // kBaileyCar
+  VictoriaParkGeometry geometry;    // kVictoriaPark
   // Standard deviations of the control noise (per control component: speed m/s and steering
   // rad for the cars, v and omega for the unicycle; for kBrownian the per-step increments of v
   // and omega, eq. 80).
@@ -41,11 +41,11 @@ struct MotionConfig {
 };
 
 struct SensorConfig {
-  double sigma_range = 0.1;                             // m
-  double sigma_bearing = 1.0 * std::numbers::pi / 180;  // rad
-  SensorOffset offset;                                  // sensor pose on the vehicle
-  double max_range = 30.0;                              // perceptual range (negative information)
-  double field_of_view = std::numbers::pi;              // rad, centred on the sensor's heading
+  double sigma_range = 0.1;                              // m
+  double sigma_bearing = 1.0 * std::numbers::pi / 180;   // rad
+  SensorOffset offset;                                   // sensor pose on the vehicle
+  double max_range = 30.0;                               // perceptual range (negative information)
+  double field_of_view = std::numbers::pi;               // rad, centred on the sensor's heading
 };
 
 // Existence log-odds (eq. 73-75); the defaults are table 1's counter form.
@@ -68,7 +68,7 @@ struct FilterConfig {
   parallel::ResamplePolicy resample{parallel::ResamplePolicy::When::kEssBelowFraction, 0.75,
                                     parallel::ResampleScheme::kSystematic};
   std::uint64_t seed = 1;
-  unsigned threads = 0;  // 0: every core
+  unsigned threads = 0;      // 0: every core
   // Particles per parallel task (a pass deals whole groups of 8 particles to about
   // particles / grain tasks, see engine/filter.cc; up to `grain` particles run on the calling
   // thread alone). 128 amortises the per-block setup of the vectorised control loop (about
