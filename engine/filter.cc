@@ -665,8 +665,8 @@ void Filter::save(std::ostream& out) const {
 #endif
 #endif
   put(out, config);
-  for (std::uint64_t v :
-       {s.step, s.controls, s.scans, s.observations, s.resamples, s.weight_resets}) {
+  for (std::uint64_t v : {s.step, s.controls, s.scans, s.observations, s.resamples,
+                          s.weight_resets}) {
     put(out, v);
   }
   put_vector(out, s.pending);
@@ -679,8 +679,8 @@ void Filter::save(std::ostream& out) const {
   put_vector(out, known);
   put_vector(out, s.pose_cov);
   const memory::ParticleStore& store = s.store;
-  for (std::span<const double> column :
-       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
+  for (std::span<const double> column : {store.x(), store.y(), store.theta(), store.v(),
+                                         store.omega(), store.log_weight()}) {
     out.write(reinterpret_cast<const char*>(column.data()),
               static_cast<std::streamsize>(column.size() * sizeof(double)));
   }
@@ -762,8 +762,8 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   for (const KnownSlot& k : known) s.known_slots.emplace(k.id, k.slot);
   s.pose_cov = std::move(pose_cov);
   memory::ParticleStore& store = s.store;
-  for (std::span<double> column :
-       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
+  for (std::span<double> column : {store.x(), store.y(), store.theta(), store.v(), store.omega(),
+                                   store.log_weight()}) {
     read_bytes(in, column.data(), column.size() * sizeof(double));
   }
   for (std::size_t i = 0; i < store.size(); ++i) {
