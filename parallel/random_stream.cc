@@ -10,6 +10,7 @@
 #include <span>
 
 #include "parallel/internal/philox.h"
+#include "parallel/internal/vmath.h"
 
 namespace fastslam::parallel {
 namespace {
@@ -35,122 +36,21 @@ constexpr std::size_t kLanes = 16;
 constexpr std::size_t kTailLanes = 4;
 
 // ---------------------------------------------------------------------------------------------
-// Floating point. Everything below is written so that the compiler has no freedom that could
-// change a result between the scalar path and the vectorised one: every multiply-add is an
-// explicit fma where the target has a fast fma (FP_FAST_FMA; then std::fma is one instruction)
-// and a plain a * b + c where it has none (then the compiler cannot contract either), and no
-// other product feeds an addition (so -ffp-contract has nothing to contract). No libm calls:
-// glibc's vector and scalar log/sin/cos need not agree, and sqrt under -fmath-errno blocks
-// vectorisation. The errors below were measured against long-double libm on 2e7 random
-// arguments; random_stream_test checks the composite Box-Muller pair (within 8 ulp of
-// max(r, 1); measured 1.4).
+// Floating point: log and sin/cos of parallel/internal/vmath.h, written so that the scalar and
+// the vectorised paths give the same bits (see there), and std::sqrt, correctly rounded, which
+// this file's -fno-math-errno (parallel/CMakeLists.txt) turns into one instruction in both
+// paths (with errno semantics it would not vectorise; the argument is never negative anyway,
+// so errno is never set). random_stream_test checks the composite Box-Muller pair (within 8
+// ulp of max(r, 1); measured 1.4).
 
-#if defined(FP_FAST_FMA)
-[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
-  return std::fma(a, b, c);
-}
-#else
-[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
-  return a * b + c;
-}
-#endif
-
-// Natural log of a positive normal double; error below 0.75 ulp (measured).
-// Reduction from musl's log (x = 2^k m, m in [sqrt(2)/2, sqrt(2))); polynomial from fdlibm's
-// e_log.c (Sun Microsystems, 1993): log(m) = 2 atanh(s), s = f / (2 + f), f = m - 1.
-[[gnu::always_inline]] inline double log_positive(double x) noexcept {
-  constexpr double kLn2Hi = 6.93147180369123816490e-01;  // k * kLn2Hi is exact for |k| < 2^11
-  constexpr double kLn2Lo = 1.90821492927058770002e-10;
-  constexpr double kLg1 = 6.666666666666735130e-01;
-  constexpr double kLg2 = 3.999999999940941908e-01;
-  constexpr double kLg3 = 2.857142874366239149e-01;
-  constexpr double kLg4 = 2.222219843214978396e-01;
-  constexpr double kLg5 = 1.818357216161805012e-01;
-  constexpr double kLg6 = 1.531383769920937332e-01;
-  constexpr double kLg7 = 1.479819860511658591e-01;
-  constexpr std::uint64_t kOff = 0x3FE6A09E667F3BCDu;  // bits of sqrt(2) / 2
-  const auto bits = std::bit_cast<std::uint64_t>(x);
-  const std::uint64_t tmp = bits - kOff;
-  const std::int64_t k = static_cast<std::int64_t>(tmp) >> 52;  // arithmetic shift (C++20)
-  const double m = std::bit_cast<double>(bits - (tmp & 0xFFF0000000000000u));
-  const auto dk = static_cast<double>(k);
-  const double f = m - 1.0;  // exact (Sterbenz)
-  const double s = f / (2.0 + f);
-  const double z = s * s;
-  const double w = z * z;
-  const double odd = z * madd(w, madd(w, madd(w, kLg7, kLg5), kLg3), kLg1);
-  const double r = madd(w, madd(w, madd(w, kLg6, kLg4), kLg2), odd);
-  const double hf = 0.5 * f;                                  // f * f / 2 = hf * f
-  const double inner = madd(s, madd(hf, f, r), dk * kLn2Lo);  // s (f^2/2 + R) + k ln2_lo
-  const double tail = madd(hf, f, -inner);                    // f^2/2 - inner
-  return madd(dk, kLn2Hi, f - tail);
-}
-
-// sqrt(v) for 0 <= v < 2^1000 (here v <= 74): reciprocal square root y by Newton from the
-// bit-level first guess (relative error 3.5e-2, then 1.8e-3, 4.7e-6, 3.3e-11), then one Newton
-// step on s = v y, which squares the error to ~1e-21 before rounding: error 0.5 ulp (measured;
-// not proven correctly rounded); sqrt(0) = 0. std::sqrt would not vectorise under -fmath-errno
-// (GCC's default), and its correctly rounded result could differ from this one.
-[[gnu::always_inline]] inline double sqrt_nonneg(double v) noexcept {
-  const double h = 0.5 * v;
-  double y = std::bit_cast<double>(0x5FE6EB50C7B537A9u - (std::bit_cast<std::uint64_t>(v) >> 1));
-  for (int i = 0; i < 3; ++i) y = y * madd(-(h * y), y, 1.5);
-  const double s = v * y;
-  return madd(madd(-s, s, v), 0.5 * y, s);  // s + (v - s^2) / (2 sqrt(v))
-}
-
-// Taylor coefficients on [-pi/4, pi/4], highest order first: kSinPoly[i] = (-1)^m / (2m + 1)!
-// for m = 8 - i (a^17 down to a^3), kCosPoly[i] = (-1)^m / (2m)! for m = 8 - i (a^16 down to
-// a^2). The first omitted terms are below 1e-19, far under an ulp.
-constexpr double inverse_factorial(int n) {
-  double f = 1.0;
-  for (int i = 2; i <= n; ++i) f *= i;  // exact up to 18!
-  return 1.0 / f;
-}
-constexpr std::array<double, 8> taylor(int first_odd_or_even) {
-  std::array<double, 8> c{};
-  for (int i = 0; i < 8; ++i) {
-    const int m = 8 - i;
-    c[i] = (m % 2 == 0 ? 1.0 : -1.0) * inverse_factorial(2 * m + first_odd_or_even);
-  }
-  return c;
-}
-constexpr std::array<double, 8> kSinPoly = taylor(1);
-constexpr std::array<double, 8> kCosPoly = taylor(0);
-
-// cos(2 pi t) and sin(2 pi t) for t = turns * 2^-53, turns an integer in [0, 2^53); absolute
-// error below 1.4 * 2^-53 (measured). The quadrant comes from rounding 4t, which is exact, so
-// there is no argument-reduction error.
-[[gnu::always_inline]] inline void sincos_turns(double turns, double& cos_out,
-                                                double& sin_out) noexcept {
-  constexpr double kShift = 0x1.8p52;  // adding it rounds [0, 2^51) to an integer
-  constexpr double kHalfPi = 1.57079632679489661923;
-  const double shifted = madd(turns, 0x1p-51, kShift);  // kShift + round(4t), ties to even
-  const auto quadrant = std::bit_cast<std::uint64_t>(shifted) & 3u;
-  const double r = madd(turns, 0x1p-51, -(shifted - kShift));  // 4t - round(4t), exact
-  const double a = r * kHalfPi;                                // in [-pi/4, pi/4]
-  const double z = a * a;
-  double sin_poly = kSinPoly[0];
-  double cos_poly = kCosPoly[0];
-  for (std::size_t i = 1; i < kSinPoly.size(); ++i) {
-    sin_poly = madd(z, sin_poly, kSinPoly[i]);
-    cos_poly = madd(z, cos_poly, kCosPoly[i]);
-  }
-  const double sin_a = madd(a * z, sin_poly, a);
-  const double cos_a = madd(z, cos_poly, 1.0);
-  // Angle = quadrant * pi/2 + a.
-  const bool swap = (quadrant & 1u) != 0;
-  const double c = swap ? sin_a : cos_a;
-  const double s = swap ? cos_a : sin_a;
-  cos_out = ((quadrant + 1) & 2u) != 0 ? -c : c;  // quadrants 1, 2
-  sin_out = (quadrant & 2u) != 0 ? -s : s;        // quadrants 2, 3
-}
+using internal::log_positive;
+using internal::sincos_turns;
 
 // Box-Muller on two 64-bit draws (see the header).
 [[gnu::always_inline]] inline void box_muller(std::uint64_t a, std::uint64_t b, double& z0,
                                               double& z1) noexcept {
   const double u = static_cast<double>(static_cast<std::int64_t>((a >> 11) + 1)) * 0x1p-53;
-  const double radius = sqrt_nonneg(-2.0 * log_positive(u));
+  const double radius = std::sqrt(-2.0 * log_positive(u));
   double c = 0.0;
   double s = 0.0;
   sincos_turns(static_cast<double>(static_cast<std::int64_t>(b >> 11)), c, s);
@@ -318,6 +218,32 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
   }
 }
 
+// For each step j: the first Box-Muller pair (block 0) of the streams of particles
+// first_particle + k, k < n, to z0[j * stride + k] and z1[j * stride + k]. Philox and the
+// transform are fused in one loop over particles, which the compiler vectorises with the words
+// kept in registers; the constants are set up once for all steps.
+[[gnu::noinline]] void pair_run(std::uint64_t seed, std::span<const std::uint64_t> steps,
+                                Purpose purpose, std::uint32_t first_particle, std::size_t n,
+                                double* z0, double* z1, std::size_t stride) noexcept {
+  const internal::PhiloxRoundKeys keys =
+      internal::philox_round_keys(key_words(seed, 0, purpose).key);
+  for (std::size_t j = 0; j < steps.size(); ++j) {
+    const KeyWords kw = key_words(seed, steps[j], purpose);
+    const std::uint64_t c2 = kw.step_low;
+    const std::uint64_t c3 = kw.step_high_purpose;
+    double* out0 = z0 + j * stride;
+    double* out1 = z1 + j * stride;
+    for (std::size_t k = 0; k < n; ++k) {
+      std::uint64_t x0 = 0;
+      std::uint64_t x1 = (first_particle + k) & 0xFFFFFFFFu;
+      std::uint64_t x2 = c2;
+      std::uint64_t x3 = c3;
+      internal::philox4x32_10_words(keys, x0, x1, x2, x3);
+      box_muller(x0 | x1 << 32, x2 | x3 << 32, out0[k], out1[k]);
+    }
+  }
+}
+
 }  // namespace
 
 std::array<double, 2> normal_pair_from_bits(std::uint64_t a, std::uint64_t b) noexcept {
@@ -428,6 +354,26 @@ void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purp
   assert(out.size() == count * per_particle && "out.size() must be count * per_particle");
   particle_blocks(key_words(seed, step, purpose), first_particle, count, per_particle, out.data(),
                   LanesToUniforms{});
+}
+
+void normal_pairs_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
+                                std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second) noexcept {
+  normal_pairs_for_particles(seed, std::span(&step, 1), purpose, first_particle, count, first,
+                             second, count);
+}
+
+void normal_pairs_for_particles(std::uint64_t seed, std::span<const std::uint64_t> steps,
+                                Purpose purpose, std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second,
+                                std::size_t stride) noexcept {
+  if (steps.empty() || count == 0) return;
+  assert(stride >= count && "stride must be at least count");
+  assert(first.size() >= (steps.size() - 1) * stride + count &&
+         second.size() >= (steps.size() - 1) * stride + count && "outputs too short");
+  assert(std::uint64_t{first_particle} + count <= (std::uint64_t{1} << 32) &&
+         "first_particle + count must not exceed 2^32");
+  pair_run(seed, steps, purpose, first_particle, count, first.data(), second.data(), stride);
 }
 
 }  // namespace fastslam::parallel

@@ -41,10 +41,12 @@
 //     over blocks. A ziggurat is faster per scalar draw but consumes a variable number of words
 //     (rejection), which breaks both properties; vectorised, Box-Muller costs about as much as
 //     the Philox block it consumes. |normal()| <= sqrt(2 * 53 ln 2) ~ 8.57.
-//   The log, sqrt, sin and cos are our own (random_stream.cc; error ~1.5 ulp of max(r, 1),
-//   tested against long-double libm): IEEE-754 +, *, / and fma on explicit operations, no libm
-//   and nothing for -ffp-contract to fuse, so the scalar and the vectorised paths give the same
-//   bits (tested) and results do not depend on the C library. They do depend on whether the
+//   The log, sin and cos are our own (parallel/internal/vmath.h; the pair's error is ~1.5 ulp
+//   of max(r, 1), tested against long-double libm): IEEE-754 +, *, / and fma on explicit
+//   operations, no libm and nothing for -ffp-contract to fuse; the sqrt is IEEE-754's correctly
+//   rounded one (a single instruction: random_stream.cc is compiled with -fno-math-errno, so it
+//   vectorises and never calls libm). So the scalar and the vectorised paths give the same bits
+//   (tested) and results do not depend on the C library. They do depend on whether the
 //   target has a fast fma (a build with -march=native on an FMA machine and a generic x86-64
 //   build may differ in the last bits of a normal); words and uniforms are identical everywhere.
 //
@@ -52,9 +54,10 @@
 // particle). The batch functions are pure and may run concurrently on disjoint outputs.
 // Costs: constructing a stream is O(1) (about 180 bytes, no allocation); a draw is O(1)
 // amortised; nothing here allocates. Single thread, AVX-512 (EPYC), g++ 12 -O3 -march=native
-// (bench/parallel/random_stream_benchmark.cc): normals_for_particles ~320 M normals/s for an
-// even per_particle and ~235 M/s for per_particle = 3 (whose fourth normal is discarded), from
-// blocks of 8 particles up; fill_normal ~380 M/s; scalar normal() ~130 M/s. Uniforms: fill
+// (bench/parallel/random_stream_benchmark.cc): normals_for_particles ~360 M normals/s for an
+// even per_particle, from blocks of 8 particles up; normal_pairs_for_particles (Philox and
+// Box-Muller fused) ~480 M/s in long runs, ~430 M/s in the filter's shape (blocks of 16
+// particles, 9 steps per call); fill_normal ~450 M/s; scalar normal() ~145 M/s. Uniforms: fill
 // ~880 M/s, uniforms_for_particles ~540 M/s (per_particle = 4), scalar uniform() ~290 M/s.
 #pragma once
 
@@ -162,6 +165,24 @@ class RandomStream {
 void normals_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
                            std::uint32_t first_particle, std::size_t count,
                            std::size_t per_particle, std::span<double> out) noexcept;
+// The same for per_particle = 2, one column per draw: first[k] and second[k] are the first and
+// second normal() of particle first_particle + k's stream (the cos and sin halves of its first
+// Box-Muller pair), i.e. out[2k] and out[2k + 1] of normals_for_particles(..., 2, out). For
+// kernels that read the two normals of a particle block as separate columns (motion sampling).
+// REQUIRES: first.size() >= count, second.size() >= count; first_particle + count <= 2^32.
+// Costs: O(count); Philox and Box-Muller fused in one vectorised loop over the particles.
+void normal_pairs_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
+                                std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second) noexcept;
+// The same for several steps in one call: for each j, first[j * stride + k] and
+// second[j * stride + k] are the first two normals of the stream {seed, steps[j],
+// first_particle + k, purpose}. One call per particle block and scan covers every control.
+// REQUIRES: stride >= count; first and second hold (steps.size() - 1) * stride + count values;
+// first_particle + count <= 2^32.
+void normal_pairs_for_particles(std::uint64_t seed, std::span<const std::uint64_t> steps,
+                                Purpose purpose, std::uint32_t first_particle, std::size_t count,
+                                std::span<double> first, std::span<double> second,
+                                std::size_t stride) noexcept;
 // The same for uniform(): out[k * per_particle + j] is the j-th uniform() of particle
 // first_particle + k's stream.
 void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,

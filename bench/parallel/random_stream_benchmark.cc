@@ -74,6 +74,55 @@ BENCHMARK(BM_RandomStreamNormalsForParticles)
     ->ArgsProduct({benchmark::CreateRange(1, fastslam::bench::upto(1 << 16, 64), 8), {3}})
     ->ArgsProduct({{1024}, {1, 2, 4, 16}});
 
+// normal_pairs_for_particles over 2^16 particles (2^6 under smoke) in calls of `block`
+// particles: the motion draws of FastSLAM 1.0 (two normals per particle and control, as two
+// columns). Args: block.
+void BM_RandomStreamNormalPairsForParticles(benchmark::State& state) {
+  const auto block = static_cast<std::size_t>(state.range(0));
+  const auto particles = static_cast<std::size_t>(fastslam::bench::upto(1 << 16, 64));
+  std::vector<double> first_normals(particles);
+  std::vector<double> second_normals(particles);
+  std::uint64_t step = 0;
+  for (auto _ : state) {
+    ++step;
+    for (std::size_t first = 0; first < particles; first += block) {
+      const std::size_t count = first + block <= particles ? block : particles - first;
+      normal_pairs_for_particles(kSeed, step, Purpose::kMotion, static_cast<std::uint32_t>(first),
+                                 count, std::span(first_normals).subspan(first, count),
+                                 std::span(second_normals).subspan(first, count));
+    }
+    benchmark::DoNotOptimize(first_normals.data());
+    benchmark::DoNotOptimize(second_normals.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(2 * particles));
+}
+BENCHMARK(BM_RandomStreamNormalPairsForParticles)->ArgName("block")->Arg(16)->Arg(50)->Arg(1024);
+
+// The filter's shape: one call per block of `block` particles covering 9 control steps (the
+// webmap's controls per scan), the pairs of step j in columns j of stride `block`.
+void BM_RandomStreamNormalPairsForSteps(benchmark::State& state) {
+  const auto block = static_cast<std::size_t>(state.range(0));
+  const auto particles = static_cast<std::size_t>(fastslam::bench::upto(1 << 16, 64));
+  constexpr std::size_t kSteps = 9;
+  std::vector<double> first_normals(kSteps * block);
+  std::vector<double> second_normals(kSteps * block);
+  std::vector<std::uint64_t> steps(kSteps);
+  std::uint64_t step = 0;
+  for (auto _ : state) {
+    for (std::uint64_t& s : steps) s = ++step;
+    for (std::size_t first = 0; first < particles; first += block) {
+      normal_pairs_for_particles(kSeed, steps, Purpose::kMotion, static_cast<std::uint32_t>(first),
+                                 block, first_normals, second_normals, block);
+      benchmark::DoNotOptimize(first_normals.data());
+      benchmark::DoNotOptimize(second_normals.data());
+      benchmark::ClobberMemory();
+    }
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(2 * kSteps * particles));
+}
+BENCHMARK(BM_RandomStreamNormalPairsForSteps)->ArgName("block")->Arg(16)->Arg(50)->Arg(1024);
+
 // uniforms_for_particles, same shape (the resampler's draws).
 void BM_RandomStreamUniformsForParticles(benchmark::State& state) {
   const auto block = static_cast<std::size_t>(state.range(0));

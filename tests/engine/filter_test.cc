@@ -17,6 +17,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -445,6 +446,58 @@ std::string determinism_case_name(const ::testing::TestParamInfo<DeterminismCase
 
 INSTANTIATE_TEST_SUITE_P(AllSchemes, FilterDeterminismTest, ::testing::ValuesIn(kDeterminismCases),
                          determinism_case_name);
+
+// Every motion model through the filter's vectorised control loop (engine/motion_batch.h):
+// bit-identical for any thread count and grain, and whether the trajectory is recorded (one
+// control per kernel call) or not (every queued control in one call, in batches of 64 steps:
+// the events queue 150 controls before one scan).
+TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording) {
+  const Scenario& s = loop_scenario();
+  std::vector<Event> events(s.events.begin(), s.events.begin() + 100);
+  for (std::size_t k = 0, added = 0; added < 150; ++k) {
+    if (!s.events[k].is_scan) {
+      events.push_back(s.events[k]);
+      ++added;
+    }
+  }
+  events.insert(events.end(), s.events.begin() + 100, s.events.begin() + 300);
+  const auto controls = static_cast<std::size_t>(
+      std::count_if(events.begin(), events.end(), [](const Event& e) { return !e.is_scan; }));
+  for (const MotionKind kind : {MotionKind::kBaileyCar, MotionKind::kUnicycle,
+                                MotionKind::kVictoriaPark, MotionKind::kBrownian}) {
+    for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
+      SCOPED_TRACE("motion " + std::to_string(static_cast<int>(kind)) + ", " +
+                   std::string(to_string(algorithm)));
+      FilterConfig config = base_config(algorithm, kSanitized ? 20 : 45);
+      config.motion.kind = kind;
+      config.grain = 16;
+      auto run = [&](const FilterConfig& c) {
+        Filter filter(c);
+        feed(filter, events, 0, events.size());
+        RunResult r;
+        r.trajectory = filter.take_trajectory();
+        r.estimate = filter.estimate();
+        r.particles = snapshot(filter);
+        return r;
+      };
+      const RunResult reference = run(config);
+      const std::tuple<unsigned, std::size_t, bool> layouts[] = {
+          {2, 1, false}, {2, 5, false}, {1, 1000, true}, {2, 16, true}};
+      for (const auto& [threads, grain, record] : layouts) {
+        SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain) +
+                     (record ? ", recorded" : ""));
+        FilterConfig c = config;
+        c.threads = threads;
+        c.grain = grain;
+        c.record_trajectory = record;
+        const RunResult r = run(c);
+        EXPECT_TRUE(identical(r.particles, reference.particles));
+        EXPECT_TRUE(identical(r.estimate, reference.estimate));
+        EXPECT_EQ(r.trajectory.size(), record ? controls : 0u);
+      }
+    }
+  }
+}
 
 // ---- 3. Queue independence ----------------------------------------------------------------------
 

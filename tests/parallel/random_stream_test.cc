@@ -343,6 +343,45 @@ TEST(RandomStream, BatchesEqualScalarStreamsForAnyBlocking) {
   normals_for_particles(seed, step, Purpose::kMotion, first, 5, 0, {});
 }
 
+// normal_pairs_for_particles == the first two normals of per-particle scalar streams (and so
+// the interleaved normals_for_particles(..., 2, ...)), for any split into calls, including
+// particle numbers near 2^32.
+TEST(RandomStream, NormalPairsEqualScalarStreamsForAnyBlocking) {
+  const std::uint64_t seed = 0x0123456789abcdefu;
+  const std::uint64_t step = 123456789;
+  for (const std::uint32_t first : {0u, 1000u, 0xFFFFFFFFu - 200u}) {
+    for (std::size_t count : {1u, 3u, 16u, 17u, 101u, 200u}) {
+      std::vector<double> a(count);
+      std::vector<double> b(count);
+      normal_pairs_for_particles(seed, step, Purpose::kMotion, first, count, a, b);
+      std::vector<double> interleaved(2 * count);
+      normals_for_particles(seed, step, Purpose::kMotion, first, count, 2, interleaved);
+      for (std::size_t k = 0; k < count; ++k) {
+        RandomStream n({seed, step, static_cast<std::uint32_t>(first + k), Purpose::kMotion});
+        const double z0 = n.normal();
+        const double z1 = n.normal();
+        ASSERT_EQ(a[k], z0) << "first=" << first << " count=" << count << " k=" << k;
+        ASSERT_EQ(b[k], z1) << "first=" << first << " count=" << count << " k=" << k;
+        ASSERT_EQ(interleaved[2 * k], z0);
+        ASSERT_EQ(interleaved[2 * k + 1], z1);
+      }
+      for (std::size_t block : {1u, 5u, 16u, 33u}) {
+        std::vector<double> split_a(count);
+        std::vector<double> split_b(count);
+        for (std::size_t k = 0; k < count; k += block) {
+          const std::size_t n = std::min(block, count - k);
+          normal_pairs_for_particles(
+              seed, step, Purpose::kMotion, static_cast<std::uint32_t>(first + k), n,
+              std::span(split_a).subspan(k, n), std::span(split_b).subspan(k, n));
+        }
+        EXPECT_TRUE(same_bits(split_a, a)) << "block=" << block;
+        EXPECT_TRUE(same_bits(split_b, b)) << "block=" << block;
+      }
+    }
+  }
+  normal_pairs_for_particles(seed, step, Purpose::kMotion, 0, 0, {}, {});  // empty batch
+}
+
 // fill_normal / fill_uniform == repeated scalar calls, from any position, and the stream draws
 // the same values afterwards.
 TEST(RandomStream, FillsEqualRepeatedScalarCalls) {

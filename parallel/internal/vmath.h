@@ -1,0 +1,204 @@
+// Vectorisable elementary functions (log, sin, cos) for the batch kernels of
+// parallel/random_stream.cc and engine/motion_batch.h. Not API.
+//
+// Why not libm: glibc's scalar and vector (libmvec) functions need not agree bit for bit, and a
+// call per element stops a loop over particles from vectorising at all. These are plain inline
+// functions of IEEE-754 +, -, *, / and fma, so a loop over lanes that calls them vectorises
+// (g++ -O3, SSE2 to AVX-512), and the scalar and the vector forms give the same bits: every
+// multiply-add is an explicit `madd` (one fma where the target has a fast fma, FP_FAST_FMA,
+// else a * b + c, which the compiler then cannot contract either), and no other product feeds
+// an addition, so -ffp-contract has nothing left to fuse. Results do depend on whether the
+// build target has a fast fma (the last bit may differ between an FMA build and a generic
+// x86-64 one), never on the C library. (For a square root, use std::sqrt in a file compiled
+// with -fno-math-errno: correctly rounded, one instruction, vectorised.)
+//
+// Accuracy (measured against long-double libm; tests/parallel/internal/vmath_test.cc asserts
+// the bounds in brackets):
+//   log_positive(x)   positive normal x: below 0.75 ulp [1 ulp].
+//   sincos_turns(t)   cos and sin of 2 pi t 2^-53 for integer t in [0, 2^53): absolute error
+//                     below 1.4 * 2^-53 [1.5 * 2^-53]; exact quadrant (no reduction error).
+//   sincos(x)         cos and sin of x for |x| <= kSinCosMaxArg = 2^20: absolute error below
+//                     1.2 * 2^-53 for |x| <= 1000 and 1.45 * 2^-53 up to 2^20 [2^-52], including
+//                     arguments next to multiples of pi/2. Beyond 2^20 the results are finite
+//                     but meaningless: callers test `sincos_in_domain` and take a scalar libm
+//                     path for such arguments (engine/motion_batch.h does).
+// Thread safety: pure functions. Costs: O(1), no allocation, no branches a vectoriser cannot
+// turn into selects; log divides once.
+#pragma once
+
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+
+namespace fastslam::parallel::internal {
+
+#if defined(FP_FAST_FMA)
+[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
+  return std::fma(a, b, c);
+}
+#else
+[[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
+  return a * b + c;
+}
+#endif
+
+// Natural log of a positive normal double; error below 0.75 ulp (measured).
+// Reduction from musl's log (x = 2^k m, m in [sqrt(2)/2, sqrt(2))); polynomial from fdlibm's
+// e_log.c (Sun Microsystems, 1993): log(m) = 2 atanh(s), s = f / (2 + f), f = m - 1.
+[[gnu::always_inline]] inline double log_positive(double x) noexcept {
+  constexpr double kLn2Hi = 6.93147180369123816490e-01;  // k * kLn2Hi is exact for |k| < 2^11
+  constexpr double kLn2Lo = 1.90821492927058770002e-10;
+  constexpr double kLg1 = 6.666666666666735130e-01;
+  constexpr double kLg2 = 3.999999999940941908e-01;
+  constexpr double kLg3 = 2.857142874366239149e-01;
+  constexpr double kLg4 = 2.222219843214978396e-01;
+  constexpr double kLg5 = 1.818357216161805012e-01;
+  constexpr double kLg6 = 1.531383769920937332e-01;
+  constexpr double kLg7 = 1.479819860511658591e-01;
+  constexpr std::uint64_t kOff = 0x3FE6A09E667F3BCDu;  // bits of sqrt(2) / 2
+  const auto bits = std::bit_cast<std::uint64_t>(x);
+  const std::uint64_t tmp = bits - kOff;
+  const std::int64_t k = static_cast<std::int64_t>(tmp) >> 52;  // arithmetic shift (C++20)
+  const double m = std::bit_cast<double>(bits - (tmp & 0xFFF0000000000000u));
+  const auto dk = static_cast<double>(k);
+  const double f = m - 1.0;  // exact (Sterbenz)
+  const double s = f / (2.0 + f);
+  const double z = s * s;
+  const double w = z * z;
+  const double odd = z * madd(w, madd(w, madd(w, kLg7, kLg5), kLg3), kLg1);
+  const double r = madd(w, madd(w, madd(w, kLg6, kLg4), kLg2), odd);
+  const double hf = 0.5 * f;                                  // f * f / 2 = hf * f
+  const double inner = madd(s, madd(hf, f, r), dk * kLn2Lo);  // s (f^2/2 + R) + k ln2_lo
+  const double tail = madd(hf, f, -inner);                    // f^2/2 - inner
+  return madd(dk, kLn2Hi, f - tail);
+}
+
+namespace vmath_detail {
+
+// Taylor coefficients on [-pi/4, pi/4], highest order first: kSinPoly[i] = (-1)^m / (2m + 1)!
+// for m = 8 - i (a^17 down to a^3), kCosPoly[i] = (-1)^m / (2m)! for m = 8 - i (a^16 down to
+// a^2). The first omitted terms are below 1e-19, far under an ulp.
+constexpr double inverse_factorial(int n) {
+  double f = 1.0;
+  for (int i = 2; i <= n; ++i) f *= i;  // exact up to 18!
+  return 1.0 / f;
+}
+constexpr std::array<double, 8> taylor(int first_odd_or_even) {
+  std::array<double, 8> c{};
+  for (int i = 0; i < 8; ++i) {
+    const int m = 8 - i;
+    c[i] = (m % 2 == 0 ? 1.0 : -1.0) * inverse_factorial(2 * m + first_odd_or_even);
+  }
+  return c;
+}
+inline constexpr std::array<double, 8> kSinPoly = taylor(1);
+inline constexpr std::array<double, 8> kCosPoly = taylor(0);
+
+// cos and sin of quadrant * pi/2 + a from sin a and cos a: a swap for odd quadrants and sign
+// flips, done on the bits (masks, xor of the sign bit) rather than with conditional
+// expressions, which GCC may turn into branches around the polynomial that only one side uses
+// (then a loop no longer if-converts without AVX-512's masked operations).
+[[gnu::always_inline]] inline void apply_quadrant(double sin_a, double cos_a,
+                                                  std::uint64_t quadrant, double& cos_out,
+                                                  double& sin_out) noexcept {
+  const std::uint64_t swap = std::uint64_t{0} - (quadrant & 1u);  // all ones in odd quadrants
+  const auto sin_bits = std::bit_cast<std::uint64_t>(sin_a);
+  const auto cos_bits = std::bit_cast<std::uint64_t>(cos_a);
+  const std::uint64_t c = (sin_bits & swap) | (cos_bits & ~swap);
+  const std::uint64_t s = (cos_bits & swap) | (sin_bits & ~swap);
+  cos_out = std::bit_cast<double>(c ^ (((quadrant + 1) & 2u) << 62));  // negative in 1, 2
+  sin_out = std::bit_cast<double>(s ^ ((quadrant & 2u) << 62));        // negative in 2, 3
+}
+
+// cos and sin of quadrant * pi/2 + a for a in [-pi/4, pi/4] (slightly beyond is fine).
+[[gnu::always_inline]] inline void sincos_quadrant(double a, std::uint64_t quadrant,
+                                                   double& cos_out, double& sin_out) noexcept {
+  const double z = a * a;
+  double sin_poly = kSinPoly[0];
+  double cos_poly = kCosPoly[0];
+#pragma GCC unroll 8
+  for (std::size_t i = 1; i < kSinPoly.size(); ++i) {
+    sin_poly = madd(z, sin_poly, kSinPoly[i]);
+    cos_poly = madd(z, cos_poly, kCosPoly[i]);
+  }
+  const double sin_a = madd(a * z, sin_poly, a);
+  const double cos_a = madd(z, cos_poly, 1.0);
+  apply_quadrant(sin_a, cos_a, quadrant, cos_out, sin_out);
+}
+
+}  // namespace vmath_detail
+
+// cos(2 pi t) and sin(2 pi t) for t = turns * 2^-53, turns an integer in [0, 2^53); absolute
+// error below 1.4 * 2^-53 (measured). The quadrant comes from rounding 4t, which is exact, so
+// there is no argument-reduction error.
+[[gnu::always_inline]] inline void sincos_turns(double turns, double& cos_out,
+                                                double& sin_out) noexcept {
+  constexpr double kShift = 0x1.8p52;  // adding it rounds [0, 2^51) to an integer
+  constexpr double kHalfPi = 1.57079632679489661923;
+  const double shifted = madd(turns, 0x1p-51, kShift);  // kShift + round(4t), ties to even
+  const auto quadrant = std::bit_cast<std::uint64_t>(shifted) & 3u;
+  const double r = madd(turns, 0x1p-51, -(shifted - kShift));  // 4t - round(4t), exact
+  vmath_detail::sincos_quadrant(r * kHalfPi, quadrant, cos_out, sin_out);
+}
+
+// The domain of `sincos`: |x| <= kSinCosMaxArg.
+inline constexpr double kSinCosMaxArg = 0x1p20;
+
+// True when sincos(x) is accurate (|x| <= kSinCosMaxArg; false for NaN and infinities).
+[[gnu::always_inline]] inline bool sincos_in_domain(double x) noexcept {
+  return std::fabs(x) <= kSinCosMaxArg;
+}
+
+namespace vmath_detail {
+
+// fdlibm's minimax kernels (k_sin.c, k_cos.c; Sun Microsystems, 1993) on [-pi/4, pi/4]: sin a =
+// a + a^3 (S1 + ... + S6 a^10), cos a = 1 - a^2/2 + a^4 (C1 + ... + C6 a^10), each within 2^-58
+// of the function; two fewer terms than the Taylor series above, for the same accuracy.
+inline constexpr std::array<double, 6> kSinMinimax = {
+    1.58969099521155010221e-10,  -2.50507602534068634195e-08, 2.75573137070700676789e-06,
+    -1.98412698298579493134e-04, 8.33333333332248946124e-03,  -1.66666666666666324348e-01};
+inline constexpr std::array<double, 6> kCosMinimax = {
+    -1.13596475577881948265e-11, 2.08757232129817482790e-09,  -2.75573143513906633035e-07,
+    2.48015872894767294178e-05,  -1.38888888888741095749e-03, 4.16666666666666019037e-02};
+
+[[gnu::always_inline]] inline void sincos_quadrant_minimax(double a, std::uint64_t quadrant,
+                                                           double& cos_out,
+                                                           double& sin_out) noexcept {
+  const double z = a * a;
+  double sin_poly = kSinMinimax[0];
+  double cos_poly = kCosMinimax[0];
+#pragma GCC unroll 8
+  for (std::size_t i = 1; i < kSinMinimax.size(); ++i) {
+    sin_poly = madd(z, sin_poly, kSinMinimax[i]);
+    cos_poly = madd(z, cos_poly, kCosMinimax[i]);
+  }
+  const double sin_a = madd(a * z, sin_poly, a);
+  const double cos_a = madd(z, madd(z, cos_poly, -0.5), 1.0);
+  apply_quadrant(sin_a, cos_a, quadrant, cos_out, sin_out);
+}
+
+}  // namespace vmath_detail
+
+// cos(x) and sin(x) for |x| <= kSinCosMaxArg (see the file comment for the bound; outside the
+// domain the results are meaningless but finite for finite x).
+// Reduction x = n pi/2 + r, n = round(x 2/pi) < 2^20, with pi/2 split into three 33-bit parts
+// (fdlibm's pio2_1, pio2_2, pio2_3): n * part is exact, x - n * pio2_1 is exact (Sterbenz), the
+// two later subtractions round once each; the neglected tail is below 2^20 * 8.5e-32.
+[[gnu::always_inline]] inline void sincos(double x, double& cos_out, double& sin_out) noexcept {
+  constexpr double kTwoOverPi = 6.36619772367581382433e-01;
+  constexpr double kShift = 0x1.8p52;  // adding it rounds |v| < 2^51 to an integer
+  constexpr double kPio2_1 = 1.57079632673412561417e+00;
+  constexpr double kPio2_2 = 6.07710050630396597660e-11;
+  constexpr double kPio2_3 = 2.02226624871116645580e-21;
+  const double shifted = madd(x, kTwoOverPi, kShift);  // kShift + round(x 2/pi), ties to even
+  const double n = shifted - kShift;
+  const auto quadrant = std::bit_cast<std::uint64_t>(shifted) & 3u;  // n mod 4 (two's complement)
+  double r = madd(-n, kPio2_1, x);
+  r = madd(-n, kPio2_2, r);
+  r = madd(-n, kPio2_3, r);
+  vmath_detail::sincos_quadrant_minimax(r, quadrant, cos_out, sin_out);
+}
+
+}  // namespace fastslam::parallel::internal
