@@ -70,15 +70,15 @@ def main():
                 label="estimated path (weighted mean)")
     title = "fastslam run"
     if metrics:
-        title = "{} M={} {} seed={}:".format(metrics.get("algorithm"), metrics.get("particles"),
-                                             metrics.get("association"), metrics.get("seed"))
-        if "pose_rmse_m" in metrics:
-            title += " pose RMSE {:.2f} m,".format(metrics["pose_rmse_m"])
-        if "landmark_rmse_m" in metrics:
-            title += " landmark RMSE {:.2f} m,".format(metrics["landmark_rmse_m"])
-        title = title.rstrip(",")
-        if "gps_rmse_m" in metrics:
-            title += ", GPS RMSE {:.2f} m".format(metrics["gps_rmse_m"])
+        errors = ["{} {:.2f} m".format(name, metrics[key])
+                  for key, name in (("pose_rmse_m", "pose RMSE"),
+                                    ("landmark_rmse_m", "landmark RMSE"),
+                                    ("gps_rmse_m", "GPS RMSE")) if key in metrics]
+        title = "{} M={} {} association, seed {}".format(
+            metrics.get("algorithm"), metrics.get("particles"), metrics.get("association"),
+            metrics.get("seed"))
+        if errors:
+            title += ": " + ", ".join(errors)
     ax.set_title(title, fontsize=10)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
