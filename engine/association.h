@@ -37,6 +37,7 @@ struct AssociationCandidate {
   std::uint32_t observation = 0;
   memory::Slot slot = 0;
   double log_likelihood = 0.0;
+  std::uint32_t tag = 0;  // the caller's (e.g. where it keeps this pair's terms); carried along
 };
 
 // `assignment` value of an observation that starts a new landmark.

@@ -69,10 +69,12 @@ struct PhaseTimes {
 // and stable across copies; a scan may hold fewer than 2^20 observations.
 constexpr std::uint64_t kObservationsPerScanLimit = std::uint64_t{1} << 20;
 
-// Per-thread scratch of the unknown-association pass over one block of particles.
+// Per-thread scratch of the unknown-association step of one particle.
 struct AssociationScratch {
-  std::vector<AssociationCandidate> candidates;
-  std::vector<std::int64_t> assignment;  // block particle k, observation j: [k * Z + j]
+  std::vector<AssociationCandidate> candidates;  // tag: index into `terms` (FastSLAM 1.0)
+  std::vector<LandmarkObservation> terms;        // 1.0: each candidate's EKF terms, reused
+  std::vector<std::int64_t> assignment;          // observation j: a slot or kNewLandmark
+  std::vector<std::uint32_t> chosen_terms;       // 1.0: observation j's terms in `terms`
   std::vector<memory::Slot> taken;
   std::vector<memory::Slot> touched;
   std::vector<memory::SpatialEntry> in_view;
@@ -193,7 +195,7 @@ struct Filter::Impl {
         advance_block(motion, begin, count, record ? recorded.data() : nullptr);
       }
       const Clock::time_point t1 = Clock::now();
-      Clock::time_point t_associated = t1;
+      double associate_seconds = 0.0;
       if (scan != nullptr) {
         // FastSLAM 2.0: the N normals of each particle's pose draw, stream (seed, scan step,
         // particle, kProposal), for the whole block in one vectorised batch (the same values
@@ -212,28 +214,27 @@ struct Filter::Impl {
                 save, cov_of);
           }
         } else {
-          // Unknown association, in two sweeps over the block so each phase is timed: choose
-          // (and, for 2.0, draw the pose), then change the maps.
+          // Unknown association, per particle: choose (and, for 2.0, draw the pose), then
+          // change the map; one clock read between the phases times both.
           thread_local AssociationScratch scratch;
-          scratch.assignment.resize(count * scan->size());
+          Clock::time_point mark = t1;
           for (std::size_t i = begin; i < end; ++i) {
             associate_particle<Motion>(
                 i, load(i), *scan, scan_step,
                 fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
-                save, cov_of, scratch, scratch.assignment.data() + (i - begin) * scan->size());
-          }
-          t_associated = Clock::now();
-          for (std::size_t i = begin; i < end; ++i) {
-            update_particle_unknown(i, *scan, scan_step, scratch,
-                                    scratch.assignment.data() + (i - begin) * scan->size());
+                save, cov_of, scratch);
+            const Clock::time_point chosen = Clock::now();
+            associate_seconds += seconds_between(mark, chosen);
+            update_particle_unknown(i, *scan, scan_step, fs2, scratch);
+            mark = Clock::now();
           }
         }
       }
       const Clock::time_point t2 = Clock::now();
       PhaseTimes& times = phase_times.local();
       times.predict += seconds_between(t0, t1);
-      times.associate += seconds_between(t1, t_associated);
-      times.update += seconds_between(t_associated, t2);
+      times.associate += associate_seconds;
+      times.update += seconds_between(t1, t2) - associate_seconds;
     };
     kernel.for_each_particle(
         blocks.tasks, [&](std::size_t t) { run_block(blocks.begin(t), blocks.begin(t + 1)); }, 1);
@@ -426,13 +427,14 @@ struct Filter::Impl {
   // Unknown association, first sweep: the candidates of every observation from the spatial
   // index, gated; the scan's joint choice (ML or DAS, mutual exclusion); the log-weight; for
   // FastSLAM 2.0 the proposal folded over the chosen landmarks and the pose drawn from it.
-  // Writes the choice of observation j to assignment[j] (a slot, or kNewLandmark).
+  // Writes the choice of observation j to scratch.assignment[j] (a slot, or kNewLandmark) and,
+  // for 1.0, where its EKF terms are (scratch.chosen_terms[j]), so the update reuses them: the
+  // pose and the landmark are the same then, since no other observation takes that landmark.
   template <class Motion, class Save, class CovOf>
   void associate_particle(std::size_t i, typename Motion::State s,
                           const std::vector<PlannedObservation>& scan, std::uint64_t scan_step,
                           const double* draw, double* log_weight, const Save& save,
-                          const CovOf& cov_of, AssociationScratch& scratch,
-                          std::int64_t* assignment) {
+                          const CovOf& cov_of, AssociationScratch& scratch) {
     constexpr int N = Motion::kStateDim;
     const bool fs2 = draw != nullptr;
     const memory::LandmarkTree& map = store.map(i);
@@ -448,7 +450,9 @@ struct Filter::Impl {
     const double offset = std::hypot(sensor.offset().x, sensor.offset().y);
     const double gate = config.gating.gate;
     const double scale2 = config.gating.search_scale * config.gating.search_scale;
+    const Eigen::Vector2d from = sensor.sensor_position(pose);
     scratch.candidates.clear();
+    scratch.terms.clear();
     for (std::size_t j = 0; j < scan.size(); ++j) {
       const Eigen::Vector2d& z = scan[j].z;
       const Eigen::Vector2d at = sensor.landmark_from(z, pose);
@@ -458,26 +462,25 @@ struct Filter::Impl {
         spread += 2.0 * (prior.cov(0, 0) + prior.cov(1, 1)) + 2.0 * lever * lever * prior.cov(2, 2);
       }
       const double radius = std::sqrt(scale2 * gate * spread);
-      const Eigen::Vector2d from = sensor.sensor_position(pose);
       index.within(at[0], at[1], radius, [&](const memory::SpatialEntry& e) {
         if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
         const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
-        double m2, ll;
+        const auto obs = static_cast<std::uint32_t>(j);
         if (fs2) {
           const ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, r);
-          m2 = t.mahalanobis2;
-          ll = t.log_likelihood;
+          if (t.mahalanobis2 <= gate) scratch.candidates.push_back({obs, e.slot, t.log_likelihood});
         } else {
           const LandmarkObservation t = evaluate_observation(sensor, lm, pose, z, r);
-          m2 = t.mahalanobis2;
-          ll = t.log_likelihood;
-        }
-        if (m2 <= gate) {
-          scratch.candidates.push_back({static_cast<std::uint32_t>(j), e.slot, ll});
+          if (t.mahalanobis2 <= gate) {
+            const auto tag = static_cast<std::uint32_t>(scratch.terms.size());
+            scratch.terms.push_back(t);
+            scratch.candidates.push_back({obs, e.slot, t.log_likelihood, tag});
+          }
         }
       });
     }
-    const std::span<std::int64_t> chosen(assignment, scan.size());
+    scratch.assignment.resize(scan.size());
+    const std::span<std::int64_t> chosen(scratch.assignment);
     double log_w;
     if (config.association == Association::kMaximumLikelihood) {
       log_w = associate_maximum_likelihood(scratch.candidates, config.log_new_landmark, chosen);
@@ -486,6 +489,12 @@ struct Filter::Impl {
           {config.seed, scan_step, static_cast<std::uint32_t>(i), parallel::Purpose::kAssociation});
       log_w = associate_sampling(scratch.candidates, config.log_new_landmark, stream, chosen,
                                  scratch.taken);
+    }
+    if (!fs2) {
+      scratch.chosen_terms.resize(scan.size());
+      for (const AssociationCandidate& c : scratch.candidates) {
+        if (chosen[c.observation] == c.slot) scratch.chosen_terms[c.observation] = c.tag;
+      }
     }
     if (fs2) {
       // Fold the chosen landmarks into the proposal in scan order, then draw the pose once; with
@@ -515,8 +524,8 @@ struct Filter::Impl {
   // (drawn) pose, their index entries moved; negative information for the landmarks in view and
   // not chosen (eq. 73-75; removal below the bound); then the new landmarks.
   void update_particle_unknown(std::size_t i, const std::vector<PlannedObservation>& scan,
-                               std::uint64_t scan_step, AssociationScratch& scratch,
-                               const std::int64_t* assignment) {
+                               std::uint64_t scan_step, bool fs2, AssociationScratch& scratch) {
+    const std::vector<std::int64_t>& assignment = scratch.assignment;
     memory::LandmarkTree& map = store.map(i);
     memory::SpatialIndex& index = store.index(i);
     const Pose pose(store.x()[i], store.y()[i], store.theta()[i]);
@@ -529,7 +538,12 @@ struct Filter::Impl {
       memory::Landmark& stored = map.edit(slot);
       const double from_x = stored.x, from_y = stored.y;
       LandmarkGaussian lm = to_gaussian(stored);
-      apply_update(lm, evaluate_observation(sensor, lm, pose, scan[j].z, r), r);
+      // 1.0: the terms from the association (same pose, same landmark); 2.0: at the drawn pose.
+      if (fs2) {
+        apply_update(lm, evaluate_observation(sensor, lm, pose, scan[j].z, r), r);
+      } else {
+        apply_update(lm, scratch.terms[scratch.chosen_terms[j]], r);
+      }
       store_gaussian(lm, stored);
       stored.log_odds += config.existence.seen;
       stored.last_seen = step_now;
