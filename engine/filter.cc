@@ -210,8 +210,8 @@ struct Filter::Impl {
           for (std::size_t i = begin; i < end; ++i) {
             update_particle<Motion>(
                 i, load(i), *scan, scan_step,
-                fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
-                save, cov_of);
+                fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight, save,
+                cov_of);
           }
         } else {
           // Unknown association, per particle: choose (and, for 2.0, draw the pose), then
@@ -221,8 +221,8 @@ struct Filter::Impl {
           for (std::size_t i = begin; i < end; ++i) {
             associate_particle<Motion>(
                 i, load(i), *scan, scan_step,
-                fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight,
-                save, cov_of, scratch);
+                fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight, save,
+                cov_of, scratch);
             const Clock::time_point chosen = Clock::now();
             associate_seconds += seconds_between(mark, chosen);
             update_particle_unknown(i, *scan, scan_step, fs2, scratch);
@@ -509,7 +509,8 @@ struct Filter::Impl {
           continue;
         }
         const LandmarkGaussian lm = to_gaussian(map.at(static_cast<memory::Slot>(chosen[j])));
-        const ProposalObservation<N> terms = evaluate_proposal<N>(sensor, lm, proposal, scan[j].z, r);
+        const ProposalObservation<N> terms =
+            evaluate_proposal<N>(sensor, lm, proposal, scan[j].z, r);
         folded += terms.log_likelihood;
         proposal = fold<N>(proposal, terms);
       }
@@ -712,7 +713,8 @@ void Filter::observe(std::span<const Observation> scan) {
                                   " observations (got " + std::to_string(scan.size()) + ")");
     }
     for (const PlannedObservation& p : plan) {
-      s.landmark_variance_bound = std::max(s.landmark_variance_bound, s.measurement_variance(p.z[0]));
+      s.landmark_variance_bound =
+          std::max(s.landmark_variance_bound, s.measurement_variance(p.z[0]));
     }
   }
   const Clock::time_point t0 = Clock::now();
@@ -739,8 +741,8 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
       throw std::invalid_argument(where() + "position must be finite and within 1e150");
     }
     const double det = l.sxx * l.syy - l.sxy * l.sxy;
-    if (!std::isfinite(l.sxx) || !std::isfinite(l.sxy) || !std::isfinite(l.syy) ||
-        !(l.sxx > 0) || !(det > 0)) {
+    if (!std::isfinite(l.sxx) || !std::isfinite(l.sxy) || !std::isfinite(l.syy) || !(l.sxx > 0) ||
+        !(det > 0)) {
       throw std::invalid_argument(where() + "covariance must be symmetric positive definite");
     }
     if (!std::isfinite(l.log_odds)) throw std::invalid_argument(where() + "log_odds not finite");
@@ -753,8 +755,8 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
     }
     // The largest eigenvalue of the covariance bounds the candidate search (see observe).
     const double half_trace = 0.5 * (l.sxx + l.syy);
-    variance_bound = std::max(variance_bound, half_trace + std::sqrt(std::max(
-                                                               0.0, half_trace * half_trace - det)));
+    variance_bound = std::max(variance_bound,
+                              half_trace + std::sqrt(std::max(0.0, half_trace * half_trace - det)));
   }
   if (!s.pending.empty()) s.run_pass(nullptr, 0);
   memory::LandmarkTree map(s.heap);
@@ -953,8 +955,8 @@ void Filter::save(std::ostream& out) const {
 #endif
 #endif
   put(out, config);
-  for (std::uint64_t v : {s.step, s.controls, s.scans, s.observations, s.resamples,
-                          s.weight_resets}) {
+  for (std::uint64_t v :
+       {s.step, s.controls, s.scans, s.observations, s.resamples, s.weight_resets}) {
     put(out, v);
   }
   put(out, s.landmark_variance_bound);
@@ -968,8 +970,8 @@ void Filter::save(std::ostream& out) const {
   put_vector(out, known);
   put_vector(out, s.pose_cov);
   const memory::ParticleStore& store = s.store;
-  for (std::span<const double> column : {store.x(), store.y(), store.theta(), store.v(),
-                                         store.omega(), store.log_weight()}) {
+  for (std::span<const double> column :
+       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
     out.write(reinterpret_cast<const char*>(column.data()),
               static_cast<std::streamsize>(column.size() * sizeof(double)));
   }
@@ -1060,8 +1062,8 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   s.pose_cov = std::move(pose_cov);
   s.landmark_variance_bound = variance_bound;
   memory::ParticleStore& store = s.store;
-  for (std::span<double> column : {store.x(), store.y(), store.theta(), store.v(), store.omega(),
-                                   store.log_weight()}) {
+  for (std::span<double> column :
+       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
     read_bytes(in, column.data(), column.size() * sizeof(double));
   }
   for (std::size_t i = 0; i < store.size(); ++i) {

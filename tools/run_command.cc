@@ -1,7 +1,5 @@
 #include "tools/run_command.h"
 
-#include <sys/resource.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -13,6 +11,7 @@
 #include <optional>
 #include <span>
 #include <stdexcept>
+#include <sys/resource.h>
 #include <unordered_map>
 #include <vector>
 
@@ -22,8 +21,8 @@
 #include "engine/angles.h"
 #include "engine/ekf_slam.h"
 #include "engine/filter.h"
-#include "tools/map_evaluation.h"
 #include "tools/log_format.h"
+#include "tools/map_evaluation.h"
 #include "tools/progress.h"
 #include "tools/tum.h"
 #include "tools/victoria_park.h"
@@ -218,20 +217,17 @@ double landmark_rmse_by_id(const std::vector<engine::MapLandmark>& map,
                            const std::vector<TruthLandmark>& truth) {
   if (map.empty() || truth.empty()) return 0.0;
   double se = 0.0;
-  {
-    std::vector<TruthLandmark> sorted = truth;
-    std::sort(sorted.begin(), sorted.end(),
-              [](const TruthLandmark& a, const TruthLandmark& b) { return a.id < b.id; });
-    for (const engine::MapLandmark& l : map) {
-      auto it =
-          std::lower_bound(sorted.begin(), sorted.end(), l.id,
-                           [](const TruthLandmark& a, std::uint64_t id) { return a.id < id; });
-      if (it == sorted.end() || it->id != l.id) {
-        throw std::runtime_error("estimated landmark id " + std::to_string(l.id) +
-                                 " is not a true landmark");
-      }
-      se += (l.x - it->x) * (l.x - it->x) + (l.y - it->y) * (l.y - it->y);
+  std::vector<TruthLandmark> sorted = truth;
+  std::sort(sorted.begin(), sorted.end(),
+            [](const TruthLandmark& a, const TruthLandmark& b) { return a.id < b.id; });
+  for (const engine::MapLandmark& l : map) {
+    auto it = std::lower_bound(sorted.begin(), sorted.end(), l.id,
+                               [](const TruthLandmark& a, std::uint64_t id) { return a.id < id; });
+    if (it == sorted.end() || it->id != l.id) {
+      throw std::runtime_error("estimated landmark id " + std::to_string(l.id) +
+                               " is not a true landmark");
     }
+    se += (l.x - it->x) * (l.x - it->x) + (l.y - it->y) * (l.y - it->y);
   }
   return std::sqrt(se / map.size());
 }
@@ -280,7 +276,8 @@ Source open_source(const RunOptions& o) {
   }
   if (o.source == "victoria-park") {
     if (o.data.empty()) {
-      throw std::invalid_argument("--source victoria-park needs --data DIR (../shared/data/victoria_park)");
+      throw std::invalid_argument(
+          "--source victoria-park needs --data DIR (../shared/data/victoria_park)");
     }
     s.log = std::make_unique<Log>(read_victoria_park(o.data).log);
     s.header = s.log->header;
@@ -342,46 +339,46 @@ int run_simulation(const RunOptions& options) {
   engine::FilterStatistics stats;
   // The loop, the same for the FastSLAM `Filter` and the `EkfSlam` baseline (same methods).
   auto drive = [&](auto& filter) {
-  for (;;) {
-    const auto t0 = Clock::now();
-    if (!source.events->next(event, scan)) break;
-    const auto t1 = Clock::now();
-    switch (event.kind) {
-      case EventKind::kControl:
-        filter.predict(event.control, event.dt);
-        control_times.push_back(event.time);
-        break;
-      case EventKind::kScan:
-        for (const engine::Observation& z : scan) {
-          if (z.id < 0) continue;
-          const auto found = truth_slot.find(static_cast<std::uint64_t>(z.id));
-          if (found != truth_slot.end()) observed[found->second] = true;
-        }
-        filter.observe(scan);
-        if (progress.due()) {
-          observe_state(filter);
-          progress.draw(state);
-        }
-        break;
-      case EventKind::kTruthPose:
-        truth.push_back({event.time, event.x, event.y, event.theta});
-        break;
-      case EventKind::kGps:
-        gps.push_back({event.time, event.x, event.y, 0.0});
-        break;
+    for (;;) {
+      const auto t0 = Clock::now();
+      if (!source.events->next(event, scan)) break;
+      const auto t1 = Clock::now();
+      switch (event.kind) {
+        case EventKind::kControl:
+          filter.predict(event.control, event.dt);
+          control_times.push_back(event.time);
+          break;
+        case EventKind::kScan:
+          for (const engine::Observation& z : scan) {
+            if (z.id < 0) continue;
+            const auto found = truth_slot.find(static_cast<std::uint64_t>(z.id));
+            if (found != truth_slot.end()) observed[found->second] = true;
+          }
+          filter.observe(scan);
+          if (progress.due()) {
+            observe_state(filter);
+            progress.draw(state);
+          }
+          break;
+        case EventKind::kTruthPose:
+          truth.push_back({event.time, event.x, event.y, event.theta});
+          break;
+        case EventKind::kGps:
+          gps.push_back({event.time, event.x, event.y, 0.0});
+          break;
+      }
+      source_seconds += std::chrono::duration<double>(t1 - t0).count();
+      filter_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
     }
-    source_seconds += std::chrono::duration<double>(t1 - t0).count();
-    filter_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
-  }
-  const auto t_end = Clock::now();
-  estimate = filter.estimate();
-  points = filter.take_trajectory();
-  filter_seconds += std::chrono::duration<double>(Clock::now() - t_end).count();
-  stats = filter.statistics();
-  if (progress.enabled()) {
-    observe_state(filter);
-    progress.finish(state);
-  }
+    const auto t_end = Clock::now();
+    estimate = filter.estimate();
+    points = filter.take_trajectory();
+    filter_seconds += std::chrono::duration<double>(Clock::now() - t_end).count();
+    stats = filter.statistics();
+    if (progress.enabled()) {
+      observe_state(filter);
+      progress.finish(state);
+    }
   };
   if (ekf) {
     engine::EkfSlam filter(config);
@@ -408,10 +405,10 @@ int run_simulation(const RunOptions& options) {
     truth_points[i] = {source.landmarks[i].x, source.landmarks[i].y};
   }
   const TruthIndex truth_index(truth_points);
-  const MapScore score = source.landmarks.empty()
-                             ? MapScore{}
-                             : score_map(estimate.map, truth_points, truth_index, observed,
-                                         options.match_radius);
+  const MapScore score =
+      source.landmarks.empty()
+          ? MapScore{}
+          : score_map(estimate.map, truth_points, truth_index, observed, options.match_radius);
   const double map_rmse = config.association == engine::Association::kKnown
                               ? landmark_rmse_by_id(estimate.map, source.landmarks)
                               : score.rmse_m;
@@ -487,8 +484,7 @@ int run_simulation(const RunOptions& options) {
               options.source == "sim" ? "simulator" : "reading", source_seconds);
   if (!source.landmarks.empty()) {
     std::printf("  map: %zu matched within %.1f m, %zu spurious, %zu of %zu observed missing\n",
-                score.matched, options.match_radius, score.spurious, score.missing,
-                observed_count);
+                score.matched, options.match_radius, score.spurious, score.missing, observed_count);
   }
   if (options.out.empty()) return 0;
 

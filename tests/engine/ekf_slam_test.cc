@@ -23,6 +23,7 @@
 #include "engine/filter.h"
 #include "engine/motion_model.h"
 #include "tests/engine/test_util.h"
+#include "tests/engine/webmap_world.h"
 #include "tests/shared_data.h"
 #include "tools/simulator.h"
 #include "tools/world.h"
@@ -755,11 +756,7 @@ TEST(EkfSlamAssociationTest, MaximumLikelihoodRecoversTheLandmarksOfASimulatedLo
 
 // ---- 7. Bailey's webmap, known ids ------------------------------------------------------------
 
-tools::World webmap(const std::string& shared) {
-  const std::string dir = shared + "/data/bailey_sim/";
-  return tools::read_world_csv(dir + "example_webmap_landmarks.csv",
-                               dir + "example_webmap_waypoints.csv");
-}
+using testing::webmap;
 
 // Measured (Release): pose RMSE over seeds 1..10 4.63 +- 1.49 m (max 7.3), landmark RMSE 3.2 m;
 // over seeds 1..30 4.54 +- 1.78 m (max 9.3). Bailey's MATLAB EKF scored 3.1 m on one seed. With

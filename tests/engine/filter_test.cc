@@ -31,6 +31,7 @@
 #include "memory/particle_store.h"
 #include "parallel/random_stream.h"
 #include "parallel/resample.h"
+#include "tests/engine/webmap_world.h"
 #include "tests/shared_data.h"
 #include "tools/map_evaluation.h"
 #include "tools/simulator.h"
@@ -1172,11 +1173,7 @@ Summary summarise(const std::vector<double>& v) {
   return s;
 }
 
-tools::World webmap(const std::string& shared) {
-  const std::string dir = shared + "/data/bailey_sim/";
-  return tools::read_world_csv(dir + "example_webmap_landmarks.csv",
-                               dir + "example_webmap_waypoints.csv");
-}
+using testing::webmap;
 
 // Measured (seeds 1..10, M = 100, threads 2, Release): FS1 pose RMSE 6.7 +- 2.5 m (max 10.7),
 // landmark RMSE 6.6 m; FS2 6.4 +- 2.9 m (max 12.3), landmark 6.3 m. Over seeds 1..30: FS1 6.9,
