@@ -1,4 +1,6 @@
 // The `fastslam` command line.
+#include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <exception>
 #include <string>
@@ -6,6 +8,7 @@
 #include <CLI/CLI.hpp>
 
 #include "tools/command_line.h"
+#include "tools/lg_slam_experiment.h"
 #include "tools/memory_demo.h"
 #include "tools/run_command.h"
 #include "tools/scaling_study.h"
@@ -89,6 +92,33 @@ int main(int argc, char** argv) {
   scaling_cmd->add_option("--seed", scaling.filter.seed, "random seed")->capture_default_str();
   scaling_cmd->add_option("--json", scaling_json, "write the points as JSON to this file");
 
+  // fastslam experiment lg-slam: the convergence experiment of section 7
+  // (tools/lg_slam_experiment.h).
+  CLI::App* experiment_cmd = app.add_subcommand("experiment", "experiments from the paper");
+  experiment_cmd->require_subcommand(1);
+  fastslam::tools::LgSlamExperimentOptions lg;
+  CLI::App* lg_cmd = experiment_cmd->add_subcommand(
+      "lg-slam",
+      "FastSLAM 2.0 with M = 1 on linear-Gaussian SLAM (section 7): landmark and pose errors per "
+      "step, anchored (landmark 0 known) and relative (offset removed); writes DIR/lg_slam.csv");
+  lg_cmd->add_option("--out", lg.out, "directory to write lg_slam.csv into")->required();
+  lg_cmd->add_option("--seeds", lg.seeds, "number of seeds")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000}))
+      ->capture_default_str();
+  lg_cmd->add_option("--first-seed", lg.first_seed, "the first seed")->capture_default_str();
+  lg_cmd->add_option("--steps", lg.steps, "steps per run (default 100000; 400 with --tiny)")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}));
+  lg_cmd->add_option("--landmarks", lg.world.landmarks, "landmarks on the circle")
+      ->check(CLI::Range(std::size_t{1}, std::size_t{100'000}))
+      ->capture_default_str();
+  lg_cmd->add_option("--particles", lg.particles, "particles (M; the theorem's case is 1)")
+      ->check(CLI::Range(std::size_t{1}, std::size_t{1'000'000}))
+      ->capture_default_str();
+  lg_cmd->add_option("--sensor-range", lg.world.sensor_range, "sensor range, m")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  lg_cmd->add_flag("--tiny", lg.tiny, "a small run (at most 3 seeds, 400 steps) for tests");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (run_cmd->parsed()) {
@@ -103,6 +133,7 @@ int main(int argc, char** argv) {
       fastslam::tools::finish_run_options(*convert_cmd, convert_words, convert);
       return fastslam::tools::convert_to_log(convert);
     }
+    if (lg_cmd->parsed()) return fastslam::tools::run_lg_slam_command(lg);
     if (demo_cmd->parsed()) return fastslam::tools::run_memory_demo(demo);
     if (scaling_cmd->parsed()) {
       using fastslam::engine::Algorithm;
