@@ -106,7 +106,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000}))
       ->capture_default_str();
   lg_cmd->add_option("--first-seed", lg.first_seed, "the first seed")->capture_default_str();
-  lg_cmd->add_option("--steps", lg.steps, "steps per run (default 100000; 400 with --tiny)")
+  lg_cmd->add_option("--steps", lg.steps, "steps per run (default 100000; 2000 with --tiny)")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}));
   lg_cmd->add_option("--landmarks", lg.world.landmarks, "landmarks on the circle")
       ->check(CLI::Range(std::size_t{1}, std::size_t{100'000}))
@@ -117,7 +117,7 @@ int main(int argc, char** argv) {
   lg_cmd->add_option("--sensor-range", lg.world.sensor_range, "sensor range, m")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  lg_cmd->add_flag("--tiny", lg.tiny, "a small run (at most 3 seeds, 400 steps) for tests");
+  lg_cmd->add_flag("--tiny", lg.tiny, "a small run (at most 3 seeds, 2000 steps) for tests");
 
   CLI11_PARSE(app, argc, argv);
   try {

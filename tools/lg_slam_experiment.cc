@@ -122,7 +122,7 @@ std::vector<LgSlamRow> run_lg_slam_experiment(const LgSlamExperimentOptions& opt
     throw std::invalid_argument("lg-slam experiment: particles must be >= 1");
   }
   validate(options.world);
-  const std::uint64_t steps = options.steps != 0 ? options.steps : options.tiny ? 400 : 100'000;
+  const std::uint64_t steps = options.steps != 0 ? options.steps : options.tiny ? 2000 : 100'000;
   const std::uint64_t seeds =
       options.tiny ? std::min<std::uint64_t>(options.seeds, 3) : options.seeds;
   std::vector<LgSlamRow> rows;

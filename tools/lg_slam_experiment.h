@@ -111,9 +111,9 @@ struct LgSlamExperimentOptions {
   std::string out;           // directory for lg_slam.csv (created)
   std::uint64_t seeds = 10;  // seeds first_seed .. first_seed + seeds - 1
   std::uint64_t first_seed = 1;
-  std::uint64_t steps = 0;    // 0: the default (100000, or 400 with tiny)
+  std::uint64_t steps = 0;    // 0: the default (100000, or 2000 with tiny)
   std::size_t particles = 1;  // M
-  bool tiny = false;          // a small run for tests: at most 3 seeds, 400 steps by default
+  bool tiny = false;          // a small run for tests: at most 3 seeds, 2000 steps by default
   LgSlamWorldConfig world;
 };
 
