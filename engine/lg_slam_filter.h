@@ -26,7 +26,8 @@
 // Ownership: the filter owns its particles; `step` borrows its observations for the call.
 // Thread safety: thread-compatible; one thread. Results are a pure function of the config, the
 // seed and the inputs. Costs: `step` is O(M (n + K)) for n observations and K landmarks (the
-// resampling copy), a few dozen flops per observation; it allocates only when resampling.
+// resampling copy), a few dozen flops per observation; it allocates O(K) scratch per step and
+// O(M K) when resampling.
 #pragma once
 
 #include <cstddef>
