@@ -268,14 +268,17 @@ Source open_source(const RunOptions& o) {
     s.landmarks = truth_landmarks(world);
     s.events = std::make_unique<SimSource>(world, sim_config(o), o.filter.seed,
                                            o.filter.association != engine::Association::kKnown);
-    // The route length bounds the number of steps, for the progress bar.
-    double route = 0.0;
-    for (std::size_t i = 0; i < world.waypoints.size(); ++i) {
-      const Point& a = world.waypoints[i];
-      const Point& b = world.waypoints[(i + 1) % world.waypoints.size()];
-      route += std::hypot(b.x - a.x, b.y - a.y);
+    // The length of the drive, for the progress bar: from the start to the first waypoint,
+    // the route `loops` times, and back from the last waypoint to the first between loops.
+    const std::vector<Point>& w = world.waypoints;
+    double open_route = 0.0;
+    for (std::size_t i = 0; i + 1 < w.size(); ++i) {
+      open_route += std::hypot(w[i + 1].x - w[i].x, w[i + 1].y - w[i].y);
     }
-    s.expected_controls = std::max(1.0, route * o.sim.loops / (o.sim.speed * o.sim.dt));
+    const double drive = std::hypot(w[0].x - world.start_x, w[0].y - world.start_y) +
+                         open_route * o.sim.loops +
+                         std::hypot(w[0].x - w.back().x, w[0].y - w.back().y) * (o.sim.loops - 1);
+    s.expected_controls = std::max(1.0, drive / (o.sim.speed * o.sim.dt));
     s.name = o.landmarks_csv.empty() ? o.world : o.landmarks_csv;
     return s;
   }
@@ -392,6 +395,7 @@ int run_simulation(const RunOptions& options) {
     stats = filter.statistics();
     if (progress.enabled()) {
       observe_state(filter);
+      state.total = state.done;  // the expected total was an estimate; the run is complete
       progress.finish(state);
     }
   };
