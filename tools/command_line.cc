@@ -28,7 +28,7 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
       ->capture_default_str();
   cmd.add_option("--spacing", w.spacing,
-                 "metres per landmark in procedural worlds (default: 3 on a grid, 10 on a loop)")
+                 "metres per landmark in procedural worlds (default: 2 on a grid, 10 on a loop)")
       ->check(CLI::PositiveNumber);
   cmd.add_option("--loop-length", o.loop_length, "length of a loop world, metres")
       ->check(CLI::PositiveNumber)

@@ -30,13 +30,14 @@ namespace fastslam::tools {
 inline constexpr double kMaxInterpolationGap = 1.0;
 
 // The built-in default of `fastslam run` (no source or world options): a stress run over a grid
-// world of 10^5 landmarks, one per 3 m x 3 m, scanned once a second (~140 detections a scan,
-// 1.04 M in all, over 306 k control steps), with FastSLAM 1.0, M = 100. Chosen by measurement
-// (README, "The built-in stress run"): at Bailey's 0.2 s scans and 10 m spacing the same 10^5
-// landmarks take 3.09 M control steps and 343 k scans (~55 s), and FastSLAM 1.0 loses its way
-// (particle depletion: pose RMSE ~2 km); the denser, shorter run keeps it within a few metres.
+// world of 10^5 landmarks, one per 2 m x 2 m (632 m a side), scanned once a second (~290
+// detections a scan, 1.04 M in all, over 145 k control steps), with FastSLAM 1.0, M = 100.
+// Chosen by measurement (README, "The built-in stress run"): at Bailey's 0.2 s scans and 10 m
+// spacing the same 10^5 landmarks take 3.09 M control steps and 343 k scans (~55 s), and
+// FastSLAM 1.0 loses its way (particle depletion: pose RMSE ~2 km); the denser, shorter run
+// keeps it within metres (what is left is mostly a small rotation of the whole estimate).
 inline constexpr std::uint64_t kDefaultGridLandmarks = 100'000;
-inline constexpr double kDefaultGridSpacing = 3.0;     // m
+inline constexpr double kDefaultGridSpacing = 2.0;     // m
 inline constexpr double kDefaultGridScanPeriod = 1.0;  // s
 inline constexpr double kDefaultLoopSpacing = 10.0;    // m
 

@@ -140,7 +140,7 @@ std::uint64_t steps_per_scan(double period) {
 }
 
 // Unset spacing and scan period resolve per world: the grid's are the built-in stress run's
-// (3 m, 1 s), a loop keeps 10 m and Bailey's 0.2 s; given values win.
+// (2 m, 1 s), a loop keeps 10 m and Bailey's 0.2 s; given values win.
 TEST(RunCommand, GridAndLoopDefaultsResolvePerWorld) {
   RunOptions o;
   o.progress = false;
@@ -152,7 +152,7 @@ TEST(RunCommand, GridAndLoopDefaultsResolvePerWorld) {
   EXPECT_EQ(m["scan_period_s"], kDefaultGridScanPeriod);
   EXPECT_EQ(m["scans"].get<std::uint64_t>(),
             m["steps"].get<std::uint64_t>() / steps_per_scan(kDefaultGridScanPeriod));
-  // 400 landmarks, 20 x 20 cells of 3 m: the true map spans 60 m.
+  // 400 landmarks, 20 x 20 cells of 2 m: the true map spans 40 m.
   double max_x = 0.0;
   {
     std::ifstream in(o.out + "/true_landmarks.csv");
@@ -163,8 +163,8 @@ TEST(RunCommand, GridAndLoopDefaultsResolvePerWorld) {
       max_x = std::max(max_x, std::stod(line.substr(comma + 1)));
     }
   }
-  EXPECT_GT(max_x, 57.0);
-  EXPECT_LT(max_x, 60.0);
+  EXPECT_GT(max_x, 38.0);
+  EXPECT_LT(max_x, 40.0);
   EXPECT_LT(m["pose_rmse_m"].get<double>(), 5.0);
 
   o.scan_period = 0.2;
