@@ -42,16 +42,24 @@ def ellipse(ax, r, **style):
                          fill=False, color="tab:red", **style))
 
 
+def shown(rows, label, limit=25000):
+    """At most about `limit` of the rows (dots past that add nothing at this scale but bytes)."""
+    step = max(1, len(rows) // limit)
+    return rows[::step], label if step == 1 else "{} (1 in {} shown)".format(label, step)
+
+
 def draw(ax, truth, est, gps, true_lm, lm, small, ellipses):
     """Landmarks under the paths; `small`: markers for a few landmarks, else dots."""
     if true_lm:
-        ax.scatter([r["x"] for r in true_lm], [r["y"] for r in true_lm], s=18 if small else 0.2,
-                   marker="+" if small else ".", color="0.35" if small else "0.6",
-                   label="true landmarks", linewidths=0.8 if small else 0, rasterized=not small)
+        rows, label = shown(true_lm, "true landmarks")
+        ax.scatter([r["x"] for r in rows], [r["y"] for r in rows], s=18 if small else 0.3,
+                   marker="+" if small else ".", color="0.35" if small else "0.55",
+                   label=label, linewidths=0.8 if small else 0, rasterized=not small)
     if lm:
-        ax.scatter([r["x"] for r in lm], [r["y"] for r in lm], s=8 if small else 0.2,
-                   color="tab:red", label="estimated map (best particle)",
-                   linewidths=0 if not small else None, rasterized=not small)
+        rows, label = shown(lm, "estimated map (best particle)")
+        ax.scatter([r["x"] for r in rows], [r["y"] for r in rows], s=8 if small else 0.3,
+                   color="tab:red", label=label, linewidths=0 if not small else None,
+                   rasterized=not small)
         if ellipses:
             for r in lm:
                 ellipse(ax, r, lw=0.6)
