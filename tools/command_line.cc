@@ -27,12 +27,15 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--landmarks", o.landmarks, "landmarks of a grid world")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
       ->capture_default_str();
-  cmd.add_option("--spacing", o.spacing, "metres per landmark in procedural worlds")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  cmd.add_option("--spacing", w.spacing,
+                 "metres per landmark in procedural worlds (default: 2 on a grid, 10 on a loop)")
+      ->check(CLI::PositiveNumber);
   cmd.add_option("--loop-length", o.loop_length, "length of a loop world, metres")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd.add_option("--scan-period", w.scan_period,
+                 "seconds between simulated scans (default: 1 on a grid, else Bailey's 0.2)")
+      ->check(CLI::Range(0.001, 3600.0));
   cmd.add_option("--loops", w.loops,
                  "times the route is driven (default: 2 for CSV worlds, 1 else)")
       ->check(CLI::Range(1, 1000));
@@ -209,6 +212,8 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
     const CLI::Option* option = cmd.get_option_no_throw(name);
     return option != nullptr && option->count() > 0;
   };
+  if (given("--spacing")) o.spacing = w.spacing;
+  if (given("--scan-period")) o.scan_period = w.scan_period;
   if (given("--sigma-range")) o.noise.sigma_range = w.sigma_range;
   if (given("--sigma-bearing")) o.noise.sigma_bearing = w.sigma_bearing;
   if (given("--sigma-u0")) o.noise.sigma_control0 = w.sigma_control0;

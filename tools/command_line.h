@@ -23,6 +23,7 @@ namespace fastslam::tools {
 // Options parsed as words (or with "given" semantics), turned into RunOptions by finish().
 struct RunWords {
   int loops = 0;
+  double spacing = 0, scan_period = 0;  // given or not: RunOptions' optionals
   std::string algorithm = "fastslam1";
   std::string association = "known";
   std::string resample = "neff";

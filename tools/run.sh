@@ -14,5 +14,6 @@ fastslam_build release
 if [ $# -gt 0 ]; then
   exec build/release/tools/fastslam "$@"
 fi
-build/release/tools/fastslam run --world grid --landmarks 10000 --particles 100 --out out/run
+# The built-in default: a stress run over 10^5 landmarks with 100 particles (`fastslam run --help`).
+build/release/tools/fastslam run --out out/run
 /usr/bin/python3 tools/plot_run.py out/run

@@ -38,18 +38,33 @@ std::int64_t peak_rss_bytes() {
   return static_cast<std::int64_t>(usage.ru_maxrss) * 1024;
 }
 
+bool csv_world(const RunOptions& o) { return !o.landmarks_csv.empty() || !o.waypoints_csv.empty(); }
+
+// The simulator's configuration: the options' with the scan period resolved (RunOptions).
+SimConfig sim_config(const RunOptions& o) {
+  SimConfig sim = o.sim;
+  if (o.scan_period) {
+    sim.dt_observe = *o.scan_period;
+  } else if (!csv_world(o) && o.world == "grid") {
+    sim.dt_observe = kDefaultGridScanPeriod;
+  }
+  return sim;
+}
+
 World make_world(const RunOptions& o) {
-  if (!o.landmarks_csv.empty() || !o.waypoints_csv.empty()) {
+  if (csv_world(o)) {
     if (o.landmarks_csv.empty() || o.waypoints_csv.empty()) {
       throw std::invalid_argument("--landmarks-csv and --waypoints-csv go together");
     }
     return read_world_csv(o.landmarks_csv, o.waypoints_csv);
   }
   if (o.world == "grid") {
-    return make_grid_world(o.landmarks, o.spacing, 1.5 * o.sim.max_range, o.filter.seed);
+    return make_grid_world(o.landmarks, o.spacing.value_or(kDefaultGridSpacing),
+                           1.5 * o.sim.max_range, o.filter.seed);
   }
   if (o.world == "loop") {
-    return make_loop_world(o.loop_length, o.spacing, o.sim.max_range, 10.0, o.filter.seed);
+    return make_loop_world(o.loop_length, o.spacing.value_or(kDefaultLoopSpacing), o.sim.max_range,
+                           10.0, o.filter.seed);
   }
   throw std::invalid_argument("unknown --world '" + o.world + "' (grid or loop)");
 }
@@ -251,16 +266,19 @@ Source open_source(const RunOptions& o) {
     const World& world = *s.world;
     s.header = sim_header(o, world);
     s.landmarks = truth_landmarks(world);
-    s.events = std::make_unique<SimSource>(world, o.sim, o.filter.seed,
+    s.events = std::make_unique<SimSource>(world, sim_config(o), o.filter.seed,
                                            o.filter.association != engine::Association::kKnown);
-    // The route length bounds the number of steps, for the progress bar.
-    double route = 0.0;
-    for (std::size_t i = 0; i < world.waypoints.size(); ++i) {
-      const Point& a = world.waypoints[i];
-      const Point& b = world.waypoints[(i + 1) % world.waypoints.size()];
-      route += std::hypot(b.x - a.x, b.y - a.y);
+    // The length of the drive, for the progress bar: from the start to the first waypoint,
+    // the route `loops` times, and back from the last waypoint to the first between loops.
+    const std::vector<Point>& w = world.waypoints;
+    double open_route = 0.0;
+    for (std::size_t i = 0; i + 1 < w.size(); ++i) {
+      open_route += std::hypot(w[i + 1].x - w[i].x, w[i + 1].y - w[i].y);
     }
-    s.expected_controls = std::max(1.0, route * o.sim.loops / (o.sim.speed * o.sim.dt));
+    const double drive = std::hypot(w[0].x - world.start_x, w[0].y - world.start_y) +
+                         open_route * o.sim.loops +
+                         std::hypot(w[0].x - w.back().x, w[0].y - w.back().y) * (o.sim.loops - 1);
+    s.expected_controls = std::max(1.0, drive / (o.sim.speed * o.sim.dt));
     s.name = o.landmarks_csv.empty() ? o.world : o.landmarks_csv;
     return s;
   }
@@ -377,6 +395,7 @@ int run_simulation(const RunOptions& options) {
     stats = filter.statistics();
     if (progress.enabled()) {
       observe_state(filter);
+      state.total = state.done;  // the expected total was an estimate; the run is complete
       progress.finish(state);
     }
   };
@@ -456,7 +475,10 @@ int run_simulation(const RunOptions& options) {
     metrics["spurious_landmarks"] = score.spurious;
     metrics["missing_landmarks"] = score.missing;
   }
-  if (options.source == "sim") metrics["clutter_rate"] = options.sim.clutter_rate;
+  if (options.source == "sim") {
+    metrics["clutter_rate"] = options.sim.clutter_rate;
+    metrics["scan_period_s"] = sim_config(options).dt_observe;
+  }
   if (config.association != engine::Association::kKnown) {
     metrics["landmarks_created"] = stats.landmarks_created;
     metrics["landmarks_removed"] = stats.landmarks_removed;
@@ -556,7 +578,7 @@ int convert_to_log(const RunOptions& options) {
     if (!file) throw std::runtime_error(partial + ": cannot open for writing");
     LogWriter writer(file, sim_header(options, world));
     for (const TruthLandmark& l : truth_landmarks(world)) writer.landmark(l);
-    SimSource sim(world, options.sim, options.filter.seed, /*clutter=*/true);
+    SimSource sim(world, sim_config(options), options.filter.seed, /*clutter=*/true);
     Event e;
     std::vector<engine::Observation> scan;
     while (sim.next(e, scan)) {

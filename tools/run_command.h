@@ -29,6 +29,18 @@ namespace fastslam::tools {
 // periods of Victoria Park and 40 control steps of Bailey's simulator.
 inline constexpr double kMaxInterpolationGap = 1.0;
 
+// The built-in default of `fastslam run` (no source or world options): a stress run over a grid
+// world of 10^5 landmarks, one per 2 m x 2 m (632 m a side), scanned once a second (~290
+// detections a scan, 1.04 M in all, over 145 k control steps), with FastSLAM 1.0, M = 100.
+// Chosen by measurement (README, "The built-in stress run"): at Bailey's 0.2 s scans and 10 m
+// spacing the same 10^5 landmarks take 3.09 M control steps and 343 k scans (~55 s), and
+// FastSLAM 1.0 loses its way (particle depletion: pose RMSE ~2 km); the denser, shorter run
+// keeps it within metres (what is left is mostly a small rotation of the whole estimate).
+inline constexpr std::uint64_t kDefaultGridLandmarks = 100'000;
+inline constexpr double kDefaultGridSpacing = 2.0;     // m
+inline constexpr double kDefaultGridScanPeriod = 1.0;  // s
+inline constexpr double kDefaultLoopSpacing = 10.0;    // m
+
 // Filter noises that replace the source's (a log header's, or the simulator's).
 struct NoiseOverrides {
   std::optional<double> sigma_range, sigma_bearing, sigma_control0, sigma_control1;
@@ -41,17 +53,22 @@ struct RunOptions {
   std::string landmarks_csv;
   std::string waypoints_csv;
   std::string world = "grid";
-  std::uint64_t landmarks = 10'000;    // grid
-  double spacing = 10.0;               // grid / loop: metres per landmark (density 1/spacing^2)
-  double loop_length = 2000.0;         // loop
+  std::uint64_t landmarks = kDefaultGridLandmarks;  // grid
+  // Metres per landmark (density 1/spacing^2); unset: kDefaultGridSpacing on a grid,
+  // kDefaultLoopSpacing on a loop.
+  std::optional<double> spacing;
+  // Seconds between simulated scans; unset: kDefaultGridScanPeriod on a grid world, else
+  // sim.dt_observe (Bailey's 0.2 s).
+  std::optional<double> scan_period;
+  double loop_length = 2000.0;  // loop
   SimConfig sim;
   engine::FilterConfig filter;
   // Unknown association: estimated landmarks are paired with true ones within this distance
   // (tools/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
   double match_radius = 5.0;
   NoiseOverrides noise;
-  std::string out;            // output directory; empty: metrics to stdout only
-  bool progress = true;       // a progress bar on stderr when it is a terminal
+  std::string out;       // output directory; empty: metrics to stdout only
+  bool progress = true;  // a progress bar on stderr when it is a terminal
 };
 
 // Runs any source (the name is historical) and returns the process exit code; throws

@@ -1,10 +1,9 @@
 #include "tools/command_line.h"
 
-#include <unistd.h>
-
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 
@@ -69,9 +68,33 @@ TEST_F(CommandLine, WithoutConfigTheDefaultsStand) {
   EXPECT_EQ(o.filter.particles, 100u);
   EXPECT_TRUE(o.progress);
   EXPECT_EQ(o.sim.loops, 1);
+  // The built-in stress run: a grid of 10^5 landmarks, FastSLAM 1.0, known ids, the grid's
+  // spacing and scan period (resolved by the run, tools/run_command.h).
+  EXPECT_EQ(o.source, "sim");
+  EXPECT_EQ(o.world, "grid");
+  EXPECT_TRUE(o.landmarks_csv.empty());
+  EXPECT_EQ(o.landmarks, 100'000u);
+  EXPECT_FALSE(o.spacing.has_value());
+  EXPECT_FALSE(o.scan_period.has_value());
+  EXPECT_EQ(o.sim.dt_observe, SimConfig{}.dt_observe);  // Bailey's, for CSV worlds
+  EXPECT_EQ(o.filter.algorithm, engine::Algorithm::kFastSlam1);
+  EXPECT_EQ(o.filter.association, engine::Association::kKnown);
   EXPECT_FALSE(o.noise.sigma_range.has_value());
   ASSERT_TRUE(o.noise.sigma_control1.has_value());
   EXPECT_EQ(*o.noise.sigma_control1, 0.1);
+}
+
+TEST_F(CommandLine, SpacingAndScanPeriodAreSetOnlyWhenGiven) {
+  RunOptions o = run(R"({"spacing": 7.5})", "--scan-period 0.4");
+  ASSERT_TRUE(o.spacing.has_value());
+  EXPECT_EQ(*o.spacing, 7.5);
+  ASSERT_TRUE(o.scan_period.has_value());
+  EXPECT_EQ(*o.scan_period, 0.4);
+  o = run(R"({"scan-period": 2})", "--spacing 4");
+  EXPECT_EQ(o.spacing.value_or(0), 4.0);
+  EXPECT_EQ(o.scan_period.value_or(0), 2.0);
+  EXPECT_NE(error_of("{}", "--scan-period 0").find("--scan-period"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--spacing -1").find("--spacing"), std::string::npos);
 }
 
 TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {

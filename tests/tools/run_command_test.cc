@@ -1,5 +1,6 @@
 #include "tools/run_command.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -48,6 +49,7 @@ TEST(RunCommand, WebmapWritesTheContractedOutputs) {
   }
   EXPECT_EQ(m["steps"], 17382);
   EXPECT_EQ(m["scans"], 1931);
+  EXPECT_EQ(m["scan_period_s"], 0.2);  // Bailey's DT_OBSERVE: CSV worlds keep it
   EXPECT_EQ(m["particles"], 100);
   EXPECT_EQ(m["algorithm"], "fastslam1");
   EXPECT_GT(m["landmarks"].get<int>(), 25);
@@ -127,6 +129,64 @@ TEST(RunCommand, SmallGridRunsWithBothAlgorithms) {
 nlohmann::json read_metrics(const std::string& dir) {
   std::ifstream in(dir + "/metrics.json");
   return nlohmann::json::parse(in);
+}
+
+// Control steps of 0.025 s per scan of `period`: the simulator scans once its floating-point sum
+// of dt reaches the period.
+std::uint64_t steps_per_scan(double period) {
+  std::uint64_t steps = 0;
+  for (double t = 0.0; t < period; t += SimConfig{}.dt) ++steps;
+  return steps;
+}
+
+// Unset spacing and scan period resolve per world: the grid's are the built-in stress run's
+// (2 m, 1 s), a loop keeps 10 m and Bailey's 0.2 s; given values win.
+TEST(RunCommand, GridAndLoopDefaultsResolvePerWorld) {
+  RunOptions o;
+  o.progress = false;
+  o.landmarks = 400;
+  o.filter.particles = 10;
+  o.out = temp_dir("run_defaults");
+  ASSERT_EQ(run_simulation(o), 0);
+  nlohmann::json m = read_metrics(o.out);
+  EXPECT_EQ(m["scan_period_s"], kDefaultGridScanPeriod);
+  EXPECT_EQ(m["scans"].get<std::uint64_t>(),
+            m["steps"].get<std::uint64_t>() / steps_per_scan(kDefaultGridScanPeriod));
+  // 400 landmarks, 20 x 20 cells of 2 m: the true map spans 40 m.
+  double max_x = 0.0;
+  {
+    std::ifstream in(o.out + "/true_landmarks.csv");
+    std::string line;
+    std::getline(in, line);
+    while (std::getline(in, line)) {
+      const auto comma = line.find(',');
+      max_x = std::max(max_x, std::stod(line.substr(comma + 1)));
+    }
+  }
+  EXPECT_GT(max_x, 38.0);
+  EXPECT_LT(max_x, 40.0);
+  EXPECT_LT(m["pose_rmse_m"].get<double>(), 5.0);
+
+  o.scan_period = 0.2;
+  o.spacing = 10.0;
+  ASSERT_EQ(run_simulation(o), 0);
+  m = read_metrics(o.out);
+  EXPECT_EQ(m["scan_period_s"], 0.2);
+  EXPECT_EQ(m["scans"].get<std::uint64_t>(), m["steps"].get<std::uint64_t>() / 9);
+  EXPECT_EQ(steps_per_scan(0.2), 9u);  // Bailey's: the sum of eight 0.025 s falls short
+
+  o = RunOptions{};
+  o.progress = false;
+  o.world = "loop";
+  o.loop_length = 300.0;
+  o.filter.particles = 10;
+  o.out = temp_dir("run_defaults");
+  ASSERT_EQ(run_simulation(o), 0);
+  m = read_metrics(o.out);
+  EXPECT_EQ(m["scan_period_s"], 0.2);
+  // A band of 2 x 30 m around 300 m of loop, one landmark per 10 m x 10 m.
+  EXPECT_EQ(m["true_landmarks"], 180);
+  std::filesystem::remove_all(o.out);
 }
 
 std::string read_text(const std::string& path) {
