@@ -41,17 +41,26 @@ struct RunOptions {
   std::string landmarks_csv;
   std::string waypoints_csv;
   std::string world = "grid";
-  std::uint64_t landmarks = 10'000;    // grid
-  double spacing = 10.0;               // grid / loop: metres per landmark (density 1/spacing^2)
-  double loop_length = 2000.0;         // loop
+  std::uint64_t landmarks = 10'000;  // grid
+  double spacing = 10.0;             // grid / loop: metres per landmark (density 1/spacing^2)
+  double loop_length = 2000.0;       // loop
   SimConfig sim;
   engine::FilterConfig filter;
   // Unknown association: estimated landmarks are paired with true ones within this distance
   // (tools/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
   double match_radius = 5.0;
   NoiseOverrides noise;
-  std::string out;            // output directory; empty: metrics to stdout only
-  bool progress = true;       // a progress bar on stderr when it is a terminal
+  std::string out;  // output directory; empty: metrics to stdout only
+  // Errors over time: a CSV row every `trace_every` scans (after the scan's update) with
+  // t, scan, pose_error_m (weighted-mean position against the latest truth pose, empty when the
+  // source has none within kMaxInterpolationGap), landmark_rmse_m (the best particle's map
+  // against the truth, by id under known association, else paired within match_radius; only
+  // landmarks seen so far; empty without true landmarks), landmarks (in the best map) and
+  // observed_landmarks (true landmarks seen so far). Empty: no trace, and no cost.
+  // Costs per row: an estimate (O(M + N), the best map copied out) and its scoring.
+  std::string trace;
+  std::uint64_t trace_every = 1;
+  bool progress = true;  // a progress bar on stderr when it is a terminal
 };
 
 // Runs any source (the name is historical) and returns the process exit code; throws
