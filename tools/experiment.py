@@ -5,6 +5,7 @@ OUT/NAME.csv (the averaged points), OUT/NAME_runs.csv (every run) and OUT/NAME.p
 the paper's figure.
 
 Usage: tools/experiment.py NAME --out DIR [--seeds N] [--tiny] [--jobs 2] [--fastslam BIN]
+       tools/experiment.py NAME --out DIR --replot   (redraws the PNG from the CSVs)
 NAME: particles (fig. 13, 22), odometry-noise (fig. 16-17), measurement-noise (fig. 21),
 loop-size (fig. 26a and 26b), timing (fig. 24), lg-slam, or all.
 
@@ -228,6 +229,19 @@ def write_sweep(out, name, x_fields, rows, per_run):
                "landmarks", "spurious_landmarks"], per_run)
 
 
+def read_csv(path):
+    """Rows of a CSV this script wrote, numbers as floats (series names stay strings)."""
+    if not os.path.exists(path):
+        raise ExperimentError(f"{path}: missing (run the experiment before --replot)")
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:
+        for key, value in row.items():
+            if key != "series" and value != "":
+                row[key] = float(value)
+    return rows
+
+
 def log_axis(axis):
     """Log scale with ticks at 1, 2, 5 per decade labelled as plain numbers."""
     axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
@@ -265,7 +279,12 @@ def particles(args, runner):
                                     "--particles", str(m)]})
     rows, per_run = sweep(runner, "particles", points, seeds)
     write_sweep(args.out, "particles", ["particles"], rows, per_run)
+    plot_particles(args.out)
 
+
+def plot_particles(out):
+    rows = read_csv(os.path.join(out, "particles.csv"))
+    seeds = int(rows[0]["runs"])
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
     ekf = [r for r in rows if r["series"] == "ekf"][0]
     for ax, metric, title in ((axes[0], "pose_rmse", "Vehicle pose"),
@@ -278,7 +297,7 @@ def particles(args, runner):
         ax.set_xscale("log")
         ax.set_yscale("log")
         log_axis(ax.yaxis)
-        log_axis(ax.xaxis)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
         ax.set_xlabel("particles M")
         ax.set_ylabel("RMS error (m)")
         ax.set_title(title)
@@ -286,7 +305,7 @@ def particles(args, runner):
         ax.legend()
     fig.suptitle(f"Accuracy against particles, simulated loop world of ~100 landmarks, "
                  f"known data association\n(mean of {seeds} seeds, bars: standard error)")
-    save_figure(fig, os.path.join(args.out, "particles.png"))
+    save_figure(fig, os.path.join(out, "particles.png"))
 
 
 def odometry_noise(args, runner):
@@ -300,14 +319,21 @@ def odometry_noise(args, runner):
         noise = ["--sim-sigma-speed", f"{SIGMA_SPEED * k:.6g}",
                  "--sim-sigma-steer", f"{math.radians(SIGMA_STEER_DEG * k):.6g}"]
         for algorithm in ("fastslam1", "ekf"):
-            points.append({"series": algorithm, "noise_scale": k,
+            points.append({"series": algorithm, "particles": m if algorithm != "ekf" else 1,
+                           "noise_scale": k,
                            "sigma_speed": SIGMA_SPEED * k, "sigma_steer_deg": SIGMA_STEER_DEG * k,
                            "args": [*world, "--algorithm", algorithm, "--association", "ml",
                                     "--particles", str(m), *noise]})
     rows, per_run = sweep(runner, "odometry-noise", points, seeds)
-    x_fields = ["noise_scale", "sigma_speed", "sigma_steer_deg"]
+    x_fields = ["particles", "noise_scale", "sigma_speed", "sigma_steer_deg"]
     write_sweep(args.out, "odometry-noise", x_fields, rows, per_run)
+    plot_odometry_noise(args.out)
 
+
+def plot_odometry_noise(out):
+    rows = read_csv(os.path.join(out, "odometry-noise.csv"))
+    seeds = int(rows[0]["runs"])
+    m = int(max(r.get("particles", 100) for r in rows))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
     for ax, metric, title in ((axes[0], "pose_rmse", "Vehicle pose"),
                               (axes[1], "landmark_rmse", "Landmarks (paired within 5 m)")):
@@ -331,7 +357,7 @@ def odometry_noise(args, runner):
         ax.legend()
     fig.suptitle("Error against odometric noise, ML data association, ~100-landmark loop "
                  f"world\n(mean of {seeds} seeds, bars: standard deviation over seeds)")
-    save_figure(fig, os.path.join(args.out, "odometry-noise.png"))
+    save_figure(fig, os.path.join(out, "odometry-noise.png"))
 
 
 def measurement_noise(args, runner):
@@ -346,14 +372,21 @@ def measurement_noise(args, runner):
         noise = ["--sim-sigma-range", f"{SIGMA_RANGE * k:.6g}",
                  "--sim-sigma-bearing", f"{math.radians(SIGMA_BEARING_DEG * k):.6g}"]
         for algorithm in ("fastslam1", "fastslam2"):
-            points.append({"series": algorithm, "noise_scale": k, "sigma_range": SIGMA_RANGE * k,
+            points.append({"series": algorithm, "particles": m, "noise_scale": k,
+                           "sigma_range": SIGMA_RANGE * k,
                            "sigma_bearing_deg": SIGMA_BEARING_DEG * k,
                            "args": [*world, "--algorithm", algorithm, "--association", "known",
                                     "--particles", str(m), *noise]})
     rows, per_run = sweep(runner, "measurement-noise", points, seeds)
-    x_fields = ["noise_scale", "sigma_range", "sigma_bearing_deg"]
+    x_fields = ["particles", "noise_scale", "sigma_range", "sigma_bearing_deg"]
     write_sweep(args.out, "measurement-noise", x_fields, rows, per_run)
+    plot_measurement_noise(args.out)
 
+
+def plot_measurement_noise(out):
+    rows = read_csv(os.path.join(out, "measurement-noise.csv"))
+    seeds = int(rows[0]["runs"])
+    m = int(rows[0]["particles"])
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
     for ax, metric, title in ((axes[0], "pose_rmse", "Vehicle pose"),
                               (axes[1], "landmark_rmse", "Landmarks")):
@@ -370,7 +403,7 @@ def measurement_noise(args, runner):
         ax.legend()
     fig.suptitle(f"Error against measurement noise, M = {m}, known data association, "
                  f"~100-landmark loop world\n(mean of {seeds} seeds, bars: standard error)")
-    save_figure(fig, os.path.join(args.out, "measurement-noise.png"))
+    save_figure(fig, os.path.join(out, "measurement-noise.png"))
 
 
 def loop_size(args, runner):
@@ -383,13 +416,14 @@ def loop_size(args, runner):
     points = []
     for length in reversed(lengths):
         for algorithm in ("fastslam1", "fastslam2"):
-            points.append({"series": algorithm, "loop_length": length,
+            points.append({"series": algorithm, "particles": m, "loops": int(loops),
+                           "loop_length": length,
                            "args": ["--world", "loop", "--loop-length", str(length),
                                     "--spacing", "15.5", "--loops", loops,
                                     "--algorithm", algorithm, "--association", "known",
                                     "--particles", str(m)]})
     rows, per_run = sweep(runner, "loop-size", points, seeds)
-    write_sweep(args.out, "loop-size", ["loop_length"], rows, per_run)
+    write_sweep(args.out, "loop-size", ["particles", "loops", "loop_length"], rows, per_run)
 
     # 26b: traces around one large loop driven twice.
     big = 300 if args.tiny else 1200
@@ -420,16 +454,29 @@ def loop_size(args, runner):
             continue  # a scan not every seed reached: do not average a subset
         mean, std, sem = stats(v["map"])
         pmean, _, psem = stats(v["pose"])
-        conv_rows.append({"series": algorithm, "particles": m_, "scan": scan, "t": v["t"],
+        conv_rows.append({"series": algorithm, "particles": m_, "loop_length": big, "scan": scan,
+                          "t": v["t"],
                           "runs": len(v["map"]), "landmark_rmse_mean": mean,
                           "landmark_rmse_std": std, "landmark_rmse_sem": sem,
                           "pose_error_mean": pmean, "pose_error_sem": psem,
                           "landmarks_mean": stats(v["lm"])[0]})
     write_csv(os.path.join(args.out, "loop-size-convergence.csv"),
-              ["series", "particles", "scan", "t", "runs", "landmark_rmse_mean",
+              ["series", "particles", "loop_length", "scan", "t", "runs", "landmark_rmse_mean",
                "landmark_rmse_std", "landmark_rmse_sem", "pose_error_mean", "pose_error_sem",
                "landmarks_mean"], conv_rows)
+    plot_loop_size(args.out)
 
+
+def plot_loop_size(out):
+    rows = read_csv(os.path.join(out, "loop-size.csv"))
+    conv_rows = read_csv(os.path.join(out, "loop-size-convergence.csv"))
+    seeds = int(rows[0]["runs"])
+    m = int(rows[0]["particles"])
+    loops = str(int(rows[0]["loops"]))
+    lengths = sorted({int(r["loop_length"]) for r in rows})
+    big = int(conv_rows[0]["loop_length"])
+    configs = sorted({(r["series"], int(r["particles"])) for r in conv_rows},
+                     key=lambda c: (c[0] == "ekf", c[1]))
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.4), layout="constrained")
     for ax, metric, title in ((axes[0], "pose_rmse", "(a) Vehicle pose"),
                               (axes[1], "landmark_rmse", "(a) Landmarks")):
@@ -469,7 +516,7 @@ def loop_size(args, runner):
     ax.legend(loc="upper left")
     fig.suptitle(f"Loop closing, known data association (mean of {seeds} seeds; bars and bands:"
                  " standard error)")
-    save_figure(fig, os.path.join(args.out, "loop-size.png"))
+    save_figure(fig, os.path.join(out, "loop-size.png"))
 
 
 def timing(args, runner):
@@ -497,7 +544,7 @@ def timing(args, runner):
     rows = []
     for (algorithm, n), s in sorted(samples.items()):
         mean, std, sem = stats(s["us"])
-        rows.append({"series": algorithm, "landmarks": n, "runs": len(s["us"]),
+        rows.append({"series": algorithm, "landmarks": n, "runs": len(s["us"]), "updates": updates,
                      "us_per_update_mean": mean, "us_per_update_std": std,
                      "us_per_update_sem": sem,
                      "observations_per_update": stats(s["obs"])[0]})
@@ -506,8 +553,15 @@ def timing(args, runner):
         r["ratio_to_fastslam1"] = r["us_per_update_mean"] / fs1[r["landmarks"]]
     write_csv(os.path.join(args.out, "timing.csv"),
               ["series", "landmarks", "runs", "us_per_update_mean", "us_per_update_std",
-               "us_per_update_sem", "observations_per_update", "ratio_to_fastslam1"], rows)
+               "us_per_update_sem", "observations_per_update", "ratio_to_fastslam1", "updates"],
+              rows)
+    plot_timing(args.out)
 
+
+def plot_timing(out):
+    rows = read_csv(os.path.join(out, "timing.csv"))
+    reps = int(rows[0]["runs"])
+    updates = int(rows[0].get("updates") or 500)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
     ax = axes[0]
     for algorithm in ("fastslam1", "fastslam2"):
@@ -536,7 +590,7 @@ def timing(args, runner):
     ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"FastSLAM 1.0 and 2.0 timing ({updates} updates per point, mean of {reps} "
                  "repetitions, bars: standard error)")
-    save_figure(fig, os.path.join(args.out, "timing.png"))
+    save_figure(fig, os.path.join(out, "timing.png"))
 
 
 LG_COLUMNS = ("step", "seed", "variant", "landmark_error", "pose_error")
@@ -583,6 +637,12 @@ def lg_slam(args, runner):
     write_csv(os.path.join(args.out, "lg-slam.csv"),
               ["series", "step", "runs", "landmark_error_mean", "landmark_error_sem",
                "pose_error_mean", "pose_error_sem"], rows)
+    plot_lg_slam(args.out)
+
+
+def plot_lg_slam(out):
+    rows = read_csv(os.path.join(out, "lg-slam.csv"))
+    seeds = int(max(r["runs"] for r in rows))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
     variants = sorted({r["series"] for r in rows})
     for ax, metric, title in ((axes[0], "landmark_error", "Landmarks"),
@@ -603,8 +663,17 @@ def lg_slam(args, runner):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
     fig.suptitle(f"LG-SLAM: error against steps (mean of {seeds} seeds, bands: standard error)")
-    save_figure(fig, os.path.join(args.out, "lg-slam.png"))
+    save_figure(fig, os.path.join(out, "lg-slam.png"))
 
+
+PLOTS = {
+    "particles": plot_particles,
+    "odometry-noise": plot_odometry_noise,
+    "measurement-noise": plot_measurement_noise,
+    "loop-size": plot_loop_size,
+    "timing": plot_timing,
+    "lg-slam": plot_lg_slam,
+}
 
 EXPERIMENTS = {
     "particles": particles,
@@ -626,17 +695,28 @@ def main():
                              "(odometry-noise 20, timing 5), tiny 2")
     parser.add_argument("--tiny", action="store_true", help="a tiny configuration, in seconds")
     parser.add_argument("--jobs", type=int, default=2, help="runs in parallel (default 2)")
+    parser.add_argument("--replot", action="store_true",
+                        help="redraw NAME.png from the NAME.csv files in --out; runs nothing")
     parser.add_argument("--fastslam", default=DEFAULT_BINARY,
                         help=f"the fastslam binary (default {DEFAULT_BINARY})")
     args = parser.parse_args()
     if args.seeds < 0 or args.jobs < 1:
         parser.error("--seeds must be >= 1 and --jobs >= 1")
     os.makedirs(args.out, exist_ok=True)
+    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
+    if args.replot:
+        for name in names:
+            try:
+                PLOTS[name](args.out)
+            except ExperimentError as e:
+                if args.name != "all":
+                    sys.exit(f"experiment: {e}")
+                log(f"{name}: not replotted: {e}")
+        return
     try:
         runner = Runner(args.fastslam, args.jobs, args.out)
     except ExperimentError as e:
         sys.exit(f"experiment: {e}")
-    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
     skipped = []
     try:
         for name in names:
