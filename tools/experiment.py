@@ -396,6 +396,7 @@ def plot_measurement_noise(out):
         ax.set_xscale("log")
         ax.set_yscale("log")
         log_axis(ax.yaxis)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
         ax.set_xlabel("measurement noise: range σ (m); bearing σ = 10 deg/m × range σ")
         ax.set_ylabel("RMS error (m)")
         ax.set_title(title)
@@ -407,28 +408,32 @@ def plot_measurement_noise(out):
 
 
 def loop_size(args, runner):
-    """Fig. 26a: error against loop size at fixed M; fig. 26b: landmark error over time around
-    a large loop for FastSLAM 2.0 with M = 1, 10, 100 and the EKF."""
+    """Fig. 26a: error against loop size at fixed M (10 and 100); fig. 26b: landmark error over
+    time around a large loop for FastSLAM 2.0 with M = 1, 10, 100 and the EKF."""
     seeds = args.seeds or (2 if args.tiny else 10)
     lengths = [200, 300] if args.tiny else [200, 400, 800, 1600, 3200]
-    m = 5 if args.tiny else 10
+    ms = [5] if args.tiny else [100, 10]
     loops = "1" if args.tiny else "2"
     points = []
-    for length in reversed(lengths):
-        for algorithm in ("fastslam1", "fastslam2"):
-            points.append({"series": algorithm, "particles": m, "loops": int(loops),
-                           "loop_length": length,
-                           "args": ["--world", "loop", "--loop-length", str(length),
-                                    "--spacing", "15.5", "--loops", loops,
-                                    "--algorithm", algorithm, "--association", "known",
-                                    "--particles", str(m)]})
+    for length, m, algorithm in ((length, m, algorithm) for m in ms for length in reversed(lengths)
+                                 for algorithm in ("fastslam1", "fastslam2")):
+        points.append({"series": algorithm, "particles": m, "loops": int(loops),
+                       "loop_length": length,
+                       "args": ["--world", "loop", "--loop-length", str(length),
+                                "--spacing", "15.5", "--loops", loops,
+                                "--algorithm", algorithm, "--association", "known",
+                                "--particles", str(m)]})
     rows, per_run = sweep(runner, "loop-size", points, seeds)
     write_sweep(args.out, "loop-size", ["particles", "loops", "loop_length"], rows, per_run)
 
     # 26b: traces around one large loop driven twice.
-    big = 300 if args.tiny else 1200
+    # 500 m: long enough to drift metres before the loop closes, short enough for M = 100 to
+    # keep some diversity back to the start (1200 m was measured too: no particle count here
+    # moved the old landmarks at the closure).
+    big = 300 if args.tiny else 500
     every = 5 if args.tiny else 10
     configs = [("fastslam2", m_) for m_ in ([1, 5] if args.tiny else [1, 10, 100])]
+    m = ms[-1]
     configs.append(("ekf", 1))
     specs = []
     for algorithm, m_ in configs:
@@ -471,7 +476,7 @@ def plot_loop_size(out):
     rows = read_csv(os.path.join(out, "loop-size.csv"))
     conv_rows = read_csv(os.path.join(out, "loop-size-convergence.csv"))
     seeds = int(rows[0]["runs"])
-    m = int(rows[0]["particles"])
+    ms = sorted({int(r["particles"]) for r in rows})
     loops = str(int(rows[0]["loops"]))
     lengths = sorted({int(r["loop_length"]) for r in rows})
     big = int(conv_rows[0]["loop_length"])
@@ -481,7 +486,17 @@ def plot_loop_size(out):
     for ax, metric, title in ((axes[0], "pose_rmse", "(a) Vehicle pose"),
                               (axes[1], "landmark_rmse", "(a) Landmarks")):
         for algorithm in ("fastslam1", "fastslam2"):
-            plot_series(ax, rows, algorithm, "loop_length", metric)
+            for m_ in sorted({int(r["particles"]) for r in rows}, reverse=True):
+                chosen = sorted((r for r in rows
+                                 if r["series"] == algorithm and r["particles"] == m_),
+                                key=lambda r: r["loop_length"])
+                shift = 1.03 if algorithm == "fastslam2" else 1 / 1.03  # bars apart
+                ax.errorbar([r["loop_length"] * shift for r in chosen],
+                            [r[f"{metric}_mean"] for r in chosen],
+                            yerr=[r[f"{metric}_sem"] for r in chosen], capsize=3, marker="o",
+                            markersize=4, color=COLORS[algorithm],
+                            linestyle="-" if m_ == max(ms) else "--",
+                            label=f"{LABELS[algorithm]}, M = {m_}")
         ax.set_xscale("log")
         ax.set_yscale("log")
         log_axis(ax.yaxis)
@@ -490,7 +505,7 @@ def plot_loop_size(out):
         ax.minorticks_off()
         ax.set_xlabel(f"loop length (m), driven {'once' if loops == '1' else 'twice'}")
         ax.set_ylabel("RMS error (m)")
-        ax.set_title(f"{title}, M = {m}")
+        ax.set_title(title)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
     ax = axes[2]
@@ -546,15 +561,17 @@ def timing(args, runner):
         mean, std, sem = stats(s["us"])
         rows.append({"series": algorithm, "landmarks": n, "runs": len(s["us"]), "updates": updates,
                      "us_per_update_mean": mean, "us_per_update_std": std,
-                     "us_per_update_sem": sem,
+                     "us_per_update_sem": sem, "us_per_update_min": min(s["us"]),
                      "observations_per_update": stats(s["obs"])[0]})
-    fs1 = {r["landmarks"]: r["us_per_update_mean"] for r in rows if r["series"] == "fastslam1"}
+    # On a shared machine other jobs only ever add time: the fastest repetition is the least
+    # disturbed estimate, so the ratio is taken between the minima.
+    fs1 = {r["landmarks"]: r["us_per_update_min"] for r in rows if r["series"] == "fastslam1"}
     for r in rows:
-        r["ratio_to_fastslam1"] = r["us_per_update_mean"] / fs1[r["landmarks"]]
+        r["ratio_to_fastslam1"] = r["us_per_update_min"] / fs1[r["landmarks"]]
     write_csv(os.path.join(args.out, "timing.csv"),
-              ["series", "landmarks", "runs", "us_per_update_mean", "us_per_update_std",
-               "us_per_update_sem", "observations_per_update", "ratio_to_fastslam1", "updates"],
-              rows)
+              ["series", "landmarks", "runs", "us_per_update_min", "us_per_update_mean",
+               "us_per_update_std", "us_per_update_sem", "observations_per_update",
+               "ratio_to_fastslam1", "updates"], rows)
     plot_timing(args.out)
 
 
@@ -566,10 +583,13 @@ def plot_timing(out):
     ax = axes[0]
     for algorithm in ("fastslam1", "fastslam2"):
         chosen = series_of(rows, algorithm, "landmarks")
-        ax.errorbar([r["landmarks"] for r in chosen], [r["us_per_update_mean"] / 1e3
-                                                       for r in chosen],
-                    yerr=[r["us_per_update_sem"] / 1e3 for r in chosen], capsize=3, marker="o",
-                    markersize=4, color=COLORS[algorithm], label=LABELS[algorithm])
+        n = [r["landmarks"] for r in chosen]
+        ax.plot(n, [r["us_per_update_min"] / 1e3 for r in chosen], marker="o", markersize=4,
+                color=COLORS[algorithm], label=f"{LABELS[algorithm]} (fastest repetition)")
+        ax.errorbar(n, [r["us_per_update_mean"] / 1e3 for r in chosen],
+                    yerr=[r["us_per_update_sem"] / 1e3 for r in chosen], capsize=2,
+                    linestyle=":", color=COLORS[algorithm], alpha=0.6,
+                    label=f"{LABELS[algorithm]} (mean ± s.e.)")
     ax.set_xscale("log")
     ax.set_ylim(bottom=0)
     ax.set_xlabel("landmarks N")
@@ -585,11 +605,11 @@ def plot_timing(out):
     ax.set_xscale("log")
     ax.set_ylim(bottom=0)
     ax.set_xlabel("landmarks N")
-    ax.set_ylabel("FastSLAM 2.0 time / FastSLAM 1.0 time")
+    ax.set_ylabel("FastSLAM 2.0 time / FastSLAM 1.0 time (fastest repetitions)")
     ax.set_title("Cost of the improved proposal")
     ax.grid(True, which="both", alpha=0.3)
-    fig.suptitle(f"FastSLAM 1.0 and 2.0 timing ({updates} updates per point, mean of {reps} "
-                 "repetitions, bars: standard error)")
+    fig.suptitle(f"FastSLAM 1.0 and 2.0 timing ({updates} updates per point, {reps} repetitions "
+                 "on a shared 2-core machine)")
     save_figure(fig, os.path.join(out, "timing.png"))
 
 

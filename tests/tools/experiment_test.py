@@ -50,7 +50,8 @@ EXPECTED = {
     },
     "timing": {
         "timing.csv": (4, {"fastslam1": 2, "fastslam2": 2},
-                       ["landmarks", "us_per_update_mean", "ratio_to_fastslam1"]),
+                       ["landmarks", "us_per_update_min", "us_per_update_mean",
+                        "ratio_to_fastslam1"]),
     },
     "lg-slam": {
         "lg-slam.csv": (None, {"anchored": None, "relative": None},

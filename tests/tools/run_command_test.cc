@@ -342,7 +342,7 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     RunOptions o;
     o.progress = false;
     o.world = "loop";
-    o.loop_length = 300.0;
+    o.loop_length = 200.0;
     o.sim.loops = 1;
     o.filter.algorithm = c.algorithm;
     o.filter.association = c.association;
