@@ -684,6 +684,7 @@ def plot_lg_slam(out):
                             [a + b for a, b in zip(mean, sem)], color=line.get_color(),
                             alpha=0.15, linewidth=0)
         ax.set_yscale("log")
+        log_axis(ax.yaxis)
         ax.set_xlabel("step")
         ax.set_ylabel("error")
         ax.set_title(title)

@@ -91,14 +91,43 @@ def check_csv(path, rows_expected, series_expected, columns):
                 assert counts[series] == n, f"{path}: {counts[series]} rows of {series}, not {n}"
 
 
+# A stand-in for `fastslam` with the LG-SLAM helper's command: lists `experiment` in its help and
+# writes lg_slam.csv in the documented columns (errors falling as 1/step, relative below
+# anchored), so the lg-slam path of experiment.py is tested before the two branches meet.
+FAKE_LG_SLAM = r"""#!/usr/bin/python3
+import os, sys
+args = sys.argv[1:]
+if args == ["--help"]:
+    print("Subcommands:\n  run\n  experiment   paper experiments")
+    sys.exit(0)
+assert args[:2] == ["experiment", "lg-slam"], args
+out = args[args.index("--out") + 1]
+seeds = int(args[args.index("--seeds") + 1])
+os.makedirs(out, exist_ok=True)
+with open(os.path.join(out, "lg_slam.csv"), "w") as f:
+    f.write("step,seed,variant,landmark_error,pose_error\n")
+    for seed in range(1, seeds + 1):
+        for step in range(1, 21):
+            for variant, scale in (("anchored", 2.0), ("relative", 1.0)):
+                f.write(f"{step},{seed},{variant},{scale * seed / step},{scale / step}\n")
+"""
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("name", choices=sorted(EXPECTED))
-    parser.add_argument("--fastslam", required=True)
+    parser.add_argument("--fastslam", required=True,
+                        help="the fastslam binary, or 'fake' (lg-slam: the stand-in above)")
     parser.add_argument("--out", required=True)
     args = parser.parse_args()
-    out = os.path.join(args.out, args.name)
+    out = os.path.join(args.out, args.name + ("-fake" if args.fastslam == "fake" else ""))
     shutil.rmtree(out, ignore_errors=True)
+    if args.fastslam == "fake":
+        os.makedirs(out)
+        args.fastslam = os.path.join(out, "fake_fastslam")
+        with open(args.fastslam, "w") as f:
+            f.write(FAKE_LG_SLAM)
+        os.chmod(args.fastslam, 0o755)
     r = subprocess.run([sys.executable, SCRIPT, args.name, "--tiny", "--jobs", "2", "--out", out,
                         "--fastslam", args.fastslam], capture_output=True, text=True)
     print(r.stdout)
@@ -113,6 +142,16 @@ def main():
         assert f.read(8) == b"\x89PNG\r\n\x1a\n", f"{png} is not a PNG"
     assert os.path.getsize(png) > 10000, f"{png} is suspiciously small"
     assert not [d for d in os.listdir(out) if d.startswith(".runs-")], "scratch left behind"
+    if args.fastslam.endswith("fake_fastslam"):  # the means over seeds of the stand-in's rows
+        with open(os.path.join(out, "lg-slam.csv")) as f:
+            rows = list(csv.DictReader(f))
+        assert len(rows) == 2 * 20, len(rows)
+        for row in rows:
+            scale = 2.0 if row["series"] == "anchored" else 1.0
+            step = float(row["step"])
+            for key, want in (("landmark_error_mean", scale * 1.5 / step),
+                              ("pose_error_mean", scale / step)):
+                assert math.isclose(float(row[key]), want, rel_tol=1e-5), (row, key, want)
     print(f"experiment {args.name}: ok")
 
 
