@@ -79,10 +79,6 @@ def stats(values):
     return mean, std, std / math.sqrt(n)
 
 
-def finite(value):
-    return isinstance(value, (int, float)) and math.isfinite(value)
-
-
 # ---------------------------------------------------------------- running
 
 class Runner:
@@ -536,7 +532,7 @@ def plot_loop_size(out):
 
 def timing(args, runner):
     """Fig. 24: time per sensor update against N for FastSLAM 1.0 and 2.0 (M = 100)."""
-    reps = args.seeds or (2 if args.tiny else 5)
+    reps = args.seeds or (2 if args.tiny else 10)
     ns = [100, 1000] if args.tiny else [100, 300, 1000, 3000, 10000, 30000, 100000, 300000,
                                         1000000]
     updates = 100 if args.tiny else 500
@@ -720,7 +716,7 @@ def main():
     parser.add_argument("--out", required=True, help="directory for NAME.csv and NAME.png")
     parser.add_argument("--seeds", type=int, default=0,
                         help="seeds (repetitions for timing); default per experiment: 10 "
-                             "(odometry-noise 20, timing 5), tiny 2")
+                             "(odometry-noise 20), tiny 2")
     parser.add_argument("--tiny", action="store_true", help="a tiny configuration, in seconds")
     parser.add_argument("--jobs", type=int, default=2, help="runs in parallel (default 2)")
     parser.add_argument("--replot", action="store_true",
