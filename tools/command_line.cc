@@ -36,6 +36,24 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--scan-period", w.scan_period,
                  "seconds between simulated scans (default: 1 on a grid, else Bailey's 0.2)")
       ->check(CLI::Range(0.001, 3600.0));
+  // The simulator's true noises. The filter assumes the same unless --sigma-* says otherwise
+  // (a simulated source's header carries these), so one flag scales both.
+  cmd.add_option("--sim-sigma-speed", o.sim.sigma_v,
+                 "simulated speed noise, m/s (true and, unless --sigma-u0, the filter's)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--sim-sigma-steer", o.sim.sigma_steer,
+                 "simulated steering noise, rad (true and, unless --sigma-u1, the filter's)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--sim-sigma-range", o.sim.sigma_range,
+                 "simulated range noise, m (true and, unless --sigma-range, the filter's)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--sim-sigma-bearing", o.sim.sigma_bearing,
+                 "simulated bearing noise, rad (true and, unless --sigma-bearing, the filter's)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd.add_option("--loops", w.loops,
                  "times the route is driven (default: 2 for CSV worlds, 1 else)")
       ->check(CLI::Range(1, 1000));
@@ -136,6 +154,12 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::NonNegativeNumber);
   cmd.add_option("--out", o.out,
                  "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
+  cmd.add_option("--trace", o.trace,
+                 "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
+                 "landmark RMSE of the seen landmarks, landmarks in the map)");
+  cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
+      ->capture_default_str();
   cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
   add_config_option(cmd, w);
 }

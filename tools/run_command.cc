@@ -317,6 +317,40 @@ void write_poses_csv(std::ofstream& file, const std::vector<StampedPose>& poses)
   }
 }
 
+// `--trace`: the errors-over-time CSV (RunOptions::trace), written as the run goes.
+class TraceWriter {
+ public:
+  TraceWriter(const std::string& path, std::uint64_t every)
+      : path_(path), every_(every == 0 ? 1 : every), file_(path) {
+    if (!file_) throw std::runtime_error("--trace " + path + ": cannot open for writing");
+    file_ << "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks\n";
+  }
+  // Counts a scan; true when this one gets a row.
+  bool due() { return scans_++ % every_ == 0; }
+  void row(double t, std::optional<double> pose_error, std::optional<double> map_error,
+           std::size_t landmarks, std::size_t observed) {
+    char line[200];
+    int n = std::snprintf(line, sizeof(line), "%.3f,%llu,", t,
+                          static_cast<unsigned long long>(scans_ - 1));
+    n += pose_error ? std::snprintf(line + n, sizeof(line) - n, "%.6f,", *pose_error)
+                    : std::snprintf(line + n, sizeof(line) - n, ",");
+    n += map_error ? std::snprintf(line + n, sizeof(line) - n, "%.6f,", *map_error)
+                   : std::snprintf(line + n, sizeof(line) - n, ",");
+    std::snprintf(line + n, sizeof(line) - n, "%zu,%zu\n", landmarks, observed);
+    file_ << line;
+  }
+  void close() {
+    file_.close();
+    if (!file_) throw std::runtime_error("--trace " + path_ + ": write failed");
+  }
+
+ private:
+  std::string path_;
+  std::uint64_t every_;
+  std::ofstream file_;
+  std::uint64_t scans_ = 0;
+};
+
 }  // namespace
 
 int run_simulation(const RunOptions& options) {
@@ -349,9 +383,20 @@ int run_simulation(const RunOptions& options) {
   for (std::size_t i = 0; i < source.landmarks.size(); ++i) truth_slot[source.landmarks[i].id] = i;
   std::unique_ptr<bool[]> observed_flags(new bool[source.landmarks.size()]());
   const std::span<bool> observed(observed_flags.get(), source.landmarks.size());
+  std::vector<Point> truth_points(source.landmarks.size());
+  for (std::size_t i = 0; i < source.landmarks.size(); ++i) {
+    truth_points[i] = {source.landmarks[i].x, source.landmarks[i].y};
+  }
+  const TruthIndex truth_index(truth_points);
+  const bool known = config.association == engine::Association::kKnown;
+  std::unique_ptr<TraceWriter> trace;
+  if (!options.trace.empty()) {
+    trace = std::make_unique<TraceWriter>(options.trace, options.trace_every);
+  }
   Event event;
   double source_seconds = 0.0;
   double filter_seconds = 0.0;
+  double trace_seconds = 0.0;
   engine::Estimate estimate;
   std::vector<engine::TrajectoryPoint> points;
   engine::FilterStatistics stats;
@@ -373,6 +418,26 @@ int run_simulation(const RunOptions& options) {
             if (found != truth_slot.end()) observed[found->second] = true;
           }
           filter.observe(scan);
+          if (trace && trace->due()) {
+            const auto t_trace = Clock::now();
+            const engine::Estimate now = filter.estimate();
+            std::optional<double> pose_error;
+            if (!truth.empty() && event.time - truth.back().time <= kMaxInterpolationGap) {
+              pose_error =
+                  std::hypot(now.mean_pose[0] - truth.back().x, now.mean_pose[1] - truth.back().y);
+            }
+            std::optional<double> map_error;
+            if (!source.landmarks.empty()) {
+              map_error = known ? landmark_rmse_by_id(now.map, source.landmarks)
+                                : score_map(now.map, truth_points, truth_index, observed,
+                                            options.match_radius)
+                                      .rmse_m;
+            }
+            trace->row(
+                event.time, pose_error, map_error, now.map.size(),
+                static_cast<std::size_t>(std::count(observed.begin(), observed.end(), true)));
+            trace_seconds += std::chrono::duration<double>(Clock::now() - t_trace).count();
+          }
           if (progress.due()) {
             observe_state(filter);
             progress.draw(state);
@@ -387,12 +452,15 @@ int run_simulation(const RunOptions& options) {
       }
       source_seconds += std::chrono::duration<double>(t1 - t0).count();
       filter_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
+      filter_seconds -= trace_seconds;  // the trace's estimates are not the filter's time
+      trace_seconds = 0.0;
     }
     const auto t_end = Clock::now();
     estimate = filter.estimate();
     points = filter.take_trajectory();
     filter_seconds += std::chrono::duration<double>(Clock::now() - t_end).count();
     stats = filter.statistics();
+    if (trace) trace->close();
     if (progress.enabled()) {
       observe_state(filter);
       state.total = state.done;  // the expected total was an estimate; the run is complete
@@ -419,11 +487,6 @@ int run_simulation(const RunOptions& options) {
   const Errors fixes = position_errors(trajectory, gps);
   // Known ids: each landmark against its own. Unknown: paired with the truth by distance
   // (tools/map_evaluation.h), which also counts spurious and missing landmarks.
-  std::vector<Point> truth_points(source.landmarks.size());
-  for (std::size_t i = 0; i < source.landmarks.size(); ++i) {
-    truth_points[i] = {source.landmarks[i].x, source.landmarks[i].y};
-  }
-  const TruthIndex truth_index(truth_points);
   const MapScore score =
       source.landmarks.empty()
           ? MapScore{}

@@ -67,7 +67,16 @@ struct RunOptions {
   // (tools/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
   double match_radius = 5.0;
   NoiseOverrides noise;
-  std::string out;       // output directory; empty: metrics to stdout only
+  std::string out;  // output directory; empty: metrics to stdout only
+  // Errors over time: a CSV row every `trace_every` scans (after the scan's update) with
+  // t, scan, pose_error_m (weighted-mean position against the latest truth pose, empty when the
+  // source has none within kMaxInterpolationGap), landmark_rmse_m (the best particle's map
+  // against the truth, by id under known association, else paired within match_radius; only
+  // landmarks seen so far; empty without true landmarks), landmarks (in the best map) and
+  // observed_landmarks (true landmarks seen so far). Empty: no trace, and no cost.
+  // Costs per row: an estimate (O(M + N), the best map copied out) and its scoring.
+  std::string trace;
+  std::uint64_t trace_every = 1;
   bool progress = true;  // a progress bar on stderr when it is a terminal
 };
 

@@ -118,5 +118,28 @@ TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
   EXPECT_NE(e.find(": not valid JSON"), std::string::npos) << e;
 }
 
+// The simulator's true noises and the trace are plain options; the filter's noise overrides stay
+// unset, so the filter takes the simulator's noises from the source's header.
+TEST_F(CommandLine, SimulatorNoiseAndTraceOptions) {
+  RunOptions o = run(R"({"sim-sigma-range": 0.05, "trace-every": 4})",
+                     "--sim-sigma-speed 0.6 --sim-sigma-steer 0.1 --sim-sigma-bearing 0.02 "
+                     "--trace t.csv");
+  EXPECT_EQ(o.sim.sigma_v, 0.6);
+  EXPECT_EQ(o.sim.sigma_steer, 0.1);
+  EXPECT_EQ(o.sim.sigma_range, 0.05);
+  EXPECT_EQ(o.sim.sigma_bearing, 0.02);
+  EXPECT_FALSE(o.noise.sigma_range.has_value());
+  EXPECT_FALSE(o.noise.sigma_control0.has_value());
+  EXPECT_EQ(o.trace, "t.csv");
+  EXPECT_EQ(o.trace_every, 4u);
+  o = run("{}", "");
+  EXPECT_EQ(o.sim.sigma_v, SimConfig{}.sigma_v);
+  EXPECT_TRUE(o.trace.empty());
+  EXPECT_EQ(o.trace_every, 1u);
+  EXPECT_NE(error_of("{}", "--sim-sigma-speed -1").find("sim-sigma-speed"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--sim-sigma-range 0").find("sim-sigma-range"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--trace-every 0").find("trace-every"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace fastslam::tools

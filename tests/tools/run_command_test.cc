@@ -6,6 +6,8 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <unordered_map>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -363,6 +365,148 @@ TEST(RunCommand, EkfWithMaximumLikelihoodOnASmallGrid) {
   // Against the nearest true landmark (ML ids are not the world's).
   EXPECT_LT(m["landmark_rmse_m"].get<double>(), 5.0);
   std::filesystem::remove_all(o.out);
+}
+
+// Rows of a CSV file after its header, split on commas (empty cells kept).
+std::vector<std::vector<std::string>> csv_rows(const std::string& path, std::string* header) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  if (header != nullptr) *header = line;
+  std::vector<std::vector<std::string>> rows;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream cells_in(line);
+    for (std::string cell; std::getline(cells_in, cell, ',');) cells.push_back(cell);
+    if (!line.empty() && line.back() == ',') cells.emplace_back();
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+// --trace: one row per `trace_every` scans; the run's results do not change; the last row
+// (every scan traced) holds the final map's size and landmark RMSE. With FastSLAM 1.0 and one
+// particle a scan leaves the pose alone, so a row's pose error is the distance between
+// trajectory.csv (the mean after each control) and truth.csv at its time.
+TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
+  struct Case {
+    engine::Algorithm algorithm;
+    engine::Association association;
+    std::uint32_t particles;
+  };
+  for (const Case c :
+       {Case{engine::Algorithm::kFastSlam1, engine::Association::kKnown, 1},
+        Case{engine::Algorithm::kFastSlam2, engine::Association::kKnown, 8},
+        Case{engine::Algorithm::kFastSlam2, engine::Association::kMaximumLikelihood, 8}}) {
+    const bool pose_oracle = c.particles == 1;
+    RunOptions o;
+    o.progress = false;
+    o.world = "loop";
+    o.loop_length = 200.0;
+    o.sim.loops = 1;
+    o.filter.algorithm = c.algorithm;
+    o.filter.association = c.association;
+    o.filter.particles = c.particles;
+    o.out = temp_dir("trace_plain");
+    ASSERT_EQ(run_simulation(o), 0);
+    const nlohmann::json plain = read_metrics(o.out);
+    RunOptions traced = o;
+    traced.out = temp_dir("trace_every");
+    traced.trace = traced.out + ".csv";
+    ASSERT_EQ(run_simulation(traced), 0);
+    const nlohmann::json m = read_metrics(traced.out);
+    for (const char* key : {"pose_rmse_m", "landmark_rmse_m", "landmarks", "resamples"}) {
+      EXPECT_EQ(plain[key], m[key]) << key;  // bit-identical
+    }
+    std::string header;
+    const auto rows = csv_rows(traced.trace, &header);
+    EXPECT_EQ(header, "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks");
+    ASSERT_EQ(rows.size(), m["scans"].get<std::size_t>());
+    // Oracle for the pose error: the written trajectory and truth at the row's time.
+    std::unordered_map<std::string, std::pair<double, double>> estimate, truth;
+    for (const auto& r : csv_rows(traced.out + "/trajectory.csv", nullptr)) {
+      estimate[r[0]] = {std::stod(r[1]), std::stod(r[2])};
+    }
+    for (const auto& r : csv_rows(traced.out + "/truth.csv", nullptr)) {
+      truth[r[0]] = {std::stod(r[1]), std::stod(r[2])};
+    }
+    std::size_t observed = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const auto& r = rows[i];
+      ASSERT_EQ(r.size(), 6u) << i;
+      EXPECT_EQ(std::stoul(r[1]), i);
+      ASSERT_TRUE(estimate.contains(r[0]) && truth.contains(r[0])) << r[0];
+      const auto [ex, ey] = estimate[r[0]];
+      const auto [tx, ty] = truth[r[0]];
+      const double error = std::stod(r[2]);
+      EXPECT_TRUE(std::isfinite(error)) << i;
+      if (pose_oracle) {
+        EXPECT_NEAR(error, std::hypot(ex - tx, ey - ty), 2e-6) << i;
+      }
+      EXPECT_TRUE(std::isfinite(std::stod(r[3]))) << i;
+      EXPECT_GE(std::stoul(r[5]), observed);  // seen so far only grows
+      observed = std::stoul(r[5]);
+    }
+    EXPECT_EQ(observed, m["observed_landmarks"].get<std::size_t>());
+    EXPECT_EQ(std::stoul(rows.back()[4]), m["landmarks"].get<std::size_t>());
+    EXPECT_NEAR(std::stod(rows.back()[3]), m["landmark_rmse_m"].get<double>(), 1e-6);
+
+    // Every 7th scan: rows for scans 0, 7, 14, ...
+    RunOptions sparse = o;
+    sparse.out.clear();
+    sparse.trace = temp_dir("trace_sparse") + ".csv";
+    sparse.trace_every = 7;
+    ASSERT_EQ(run_simulation(sparse), 0);
+    const auto sparse_rows = csv_rows(sparse.trace, nullptr);
+    ASSERT_EQ(sparse_rows.size(), (rows.size() + 6) / 7);
+    for (std::size_t i = 0; i < sparse_rows.size(); ++i) {
+      EXPECT_EQ(sparse_rows[i], rows[7 * i]) << i;
+    }
+    for (const std::string& dir : {o.out, traced.out}) std::filesystem::remove_all(dir);
+    std::filesystem::remove(traced.trace);
+    std::filesystem::remove(sparse.trace);
+  }
+}
+
+TEST(RunCommand, TraceRefusesAnUnwritablePathBeforeRunning) {
+  RunOptions o;
+  o.progress = false;
+  o.landmarks = 50;
+  o.trace = temp_dir("no_such_dir") + "/trace.csv";
+  try {
+    run_simulation(o);
+    ADD_FAILURE() << "an unwritable trace was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(o.trace + ": cannot open"), std::string::npos) << e.what();
+  }
+}
+
+// The simulator's noises are the filter's unless overridden: a noise-free simulation (zero
+// control noise, tiny sensor noise) against the default one.
+TEST(RunCommand, SimulatorNoiseScalesTheTruthAndTheFilter) {
+  RunOptions o;
+  o.progress = false;
+  o.world = "loop";
+  o.loop_length = 300.0;
+  o.sim.loops = 1;
+  o.filter.particles = 1;
+  o.filter.algorithm = engine::Algorithm::kFastSlam2;
+  o.out = temp_dir("sim_noise_default");
+  ASSERT_EQ(run_simulation(o), 0);
+  const double noisy = read_metrics(o.out)["pose_rmse_m"].get<double>();
+  RunOptions quiet = o;
+  quiet.sim.sigma_v = 0.0;
+  quiet.sim.sigma_steer = 0.0;
+  quiet.sim.sigma_range = 1e-4;
+  quiet.sim.sigma_bearing = 1e-5;
+  quiet.out = temp_dir("sim_noise_quiet");
+  ASSERT_EQ(run_simulation(quiet), 0);
+  const double exact = read_metrics(quiet.out)["pose_rmse_m"].get<double>();
+  // With no control noise the prediction is the truth (dead reckoning is exact).
+  EXPECT_LT(exact, 1e-3);
+  EXPECT_GT(noisy, 10 * exact);
+  std::filesystem::remove_all(o.out);
+  std::filesystem::remove_all(quiet.out);
 }
 
 }  // namespace
