@@ -21,6 +21,7 @@
 
 #include "engine/filter_config.h"
 #include "tools/simulator.h"
+#include "tools/victoria_park.h"
 
 namespace fastslam::tools {
 
@@ -28,6 +29,11 @@ namespace fastslam::tools {
 // pose or GPS fix falling in such a gap of the estimate is skipped. One second is 40 odometry
 // periods of Victoria Park and 40 control steps of Bailey's simulator.
 inline constexpr double kMaxInterpolationGap = 1.0;
+
+// Defaults of the no-odometry model (--motion none), per control step (40 Hz on Victoria Park
+// and in the simulator): docs/victoria-park.md has the sweep they come from.
+inline constexpr double kNoOdometrySigmaV = 0.05;      // m/s per step
+inline constexpr double kNoOdometrySigmaOmega = 0.02;  // rad/s per step
 
 // Filter noises that replace the source's (a log header's, or the simulator's).
 struct NoiseOverrides {
@@ -41,17 +47,27 @@ struct RunOptions {
   std::string landmarks_csv;
   std::string waypoints_csv;
   std::string world = "grid";
-  std::uint64_t landmarks = 10'000;    // grid
-  double spacing = 10.0;               // grid / loop: metres per landmark (density 1/spacing^2)
-  double loop_length = 2000.0;         // loop
+  std::uint64_t landmarks = 10'000;  // grid
+  double spacing = 10.0;             // grid / loop: metres per landmark (density 1/spacing^2)
+  double loop_length = 2000.0;       // loop
   SimConfig sim;
   engine::FilterConfig filter;
   // Unknown association: estimated landmarks are paired with true ones within this distance
   // (tools/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
   double match_radius = 5.0;
   NoiseOverrides noise;
-  std::string out;            // output directory; empty: metrics to stdout only
-  bool progress = true;       // a progress bar on stderr when it is a terminal
+  // "odometry": the source's motion model with its controls; "none": the controls are ignored
+  // (only their dt is used) and the pose follows the Brownian velocity model of eq. 79-81
+  // (engine::MotionKind::kBrownian), with `no_odometry_sigma` (the per-control increments of v,
+  // m/s, and omega, rad/s; --sigma-u0/--sigma-u1 override them).
+  std::string motion = "odometry";
+  double no_odometry_sigma[2] = {kNoOdometrySigmaV, kNoOdometrySigmaOmega};
+  // Replaces the source's start heading (rad) when set.
+  std::optional<double> initial_heading;
+  // --source victoria-park: the reader's options (gate, geometry, heading fit).
+  VictoriaParkOptions victoria_park;
+  std::string out;       // output directory; empty: metrics to stdout only
+  bool progress = true;  // a progress bar on stderr when it is a terminal
 };
 
 // Runs any source (the name is historical) and returns the process exit code; throws
