@@ -1,10 +1,10 @@
 #include "tools/command_line.h"
 
-#include <unistd.h>
-
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <string>
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 
@@ -93,6 +93,37 @@ TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
   EXPECT_NE(e.find(": expected one JSON object"), std::string::npos) << e;
   e = error_of(R"({"particles": 10,)");
   EXPECT_NE(e.find(": not valid JSON"), std::string::npos) << e;
+}
+
+// --source victoria-park brings its negative-information preset (tools/victoria_park.h) for the
+// options not given; a flag or a config key still wins; other sources keep the engine's.
+TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
+  const VictoriaParkFilterDefaults vp;
+  const engine::ExistenceConfig engine_defaults;
+  RunOptions o = run("{}", "--source victoria-park");
+  EXPECT_EQ(o.filter.existence.range_margin, vp.existence_range_margin);
+  EXPECT_EQ(o.filter.existence.missed, vp.existence_missed);
+  EXPECT_NE(vp.existence_range_margin, engine_defaults.range_margin);  // the test can fail
+  o = run(R"({"existence-range-margin": 2.5})", "--source victoria-park --existence-missed 1");
+  EXPECT_EQ(o.filter.existence.range_margin, 2.5);
+  EXPECT_EQ(o.filter.existence.missed, 1.0);
+  o = run("{}", "--source sim");
+  EXPECT_EQ(o.filter.existence.range_margin, engine_defaults.range_margin);
+  EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
+}
+
+TEST_F(CommandLine, MotionNoneAndTheStartHeading) {
+  RunOptions o = run("{}", "");
+  EXPECT_EQ(o.motion, "odometry");
+  EXPECT_FALSE(o.initial_heading.has_value());
+  o = run(R"({"motion": "none"})", "--initial-heading-deg 90 --heading-fit-seconds 12");
+  EXPECT_EQ(o.motion, "none");
+  ASSERT_TRUE(o.initial_heading.has_value());
+  EXPECT_DOUBLE_EQ(*o.initial_heading, std::numbers::pi / 2);
+  EXPECT_EQ(o.victoria_park.heading_fit_seconds, 12.0);
+  EXPECT_NE(error_of("{}", "--motion bogus").find("--motion"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--heading-fit-seconds 0").find("--heading-fit-seconds"),
+            std::string::npos);
 }
 
 }  // namespace
