@@ -233,6 +233,10 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
       o.filter.existence.range_margin = vp.existence_range_margin;
     }
     if (!given("--existence-missed")) o.filter.existence.missed = vp.existence_missed;
+    if (o.filter.algorithm == Algorithm::kFastSlam2) {
+      if (!given("--sigma-range")) o.noise.sigma_range = vp.fastslam2_sigma_range;
+      if (!given("--sigma-bearing")) o.noise.sigma_bearing = vp.fastslam2_sigma_bearing;
+    }
   }
   if (given("--initial-heading-deg")) {
     o.initial_heading = w.initial_heading_deg * std::numbers::pi / 180;

@@ -1,9 +1,8 @@
 #include "tools/progress.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <cmath>
+#include <unistd.h>
 
 namespace fastslam::tools {
 namespace {

@@ -3,11 +3,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <nanoflann.hpp>
 #include <numbers>
 #include <stdexcept>
 #include <string>
-
-#include <nanoflann.hpp>
 
 #include "parallel/random_stream.h"
 #include "tools/csv.h"

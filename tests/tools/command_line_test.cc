@@ -107,7 +107,12 @@ TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
   o = run(R"({"existence-range-margin": 2.5})", "--source victoria-park --existence-missed 1");
   EXPECT_EQ(o.filter.existence.range_margin, 2.5);
   EXPECT_EQ(o.filter.existence.missed, 1.0);
-  o = run("{}", "--source sim");
+  EXPECT_FALSE(o.noise.sigma_range.has_value());  // FastSLAM 1.0: the header's noises
+  o = run("{}", "--source victoria-park --algorithm fastslam2 --sigma-range 0.7");
+  EXPECT_EQ(*o.noise.sigma_range, 0.7);
+  EXPECT_EQ(*o.noise.sigma_bearing, vp.fastslam2_sigma_bearing);
+  o = run("{}", "--source sim --algorithm fastslam2");
+  EXPECT_FALSE(o.noise.sigma_bearing.has_value());
   EXPECT_EQ(o.filter.existence.range_margin, engine_defaults.range_margin);
   EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
 }
