@@ -10,7 +10,8 @@
 // last sample is held for one nominal period, 25 ms (the odometry is exactly 40 Hz). A scan is
 // stamped at its own time and comes after every control stamped at or before it, so the pose
 // it is processed at lags the scan by less than one odometry period (25 ms, < 0.25 m at the
-// car's speeds). On equal times the order is control, scan, GPS.
+// car's speeds), unless `split_controls_at_scans` cuts that interval at the scan. On equal
+// times the order is control, scan, GPS.
 //
 // Reading is strict: a wrong or missing header, a wrong column count, a field that is not a
 // number, NaN or infinity (tools/csv.h), a non-positive range, a negative diameter, time going
@@ -72,8 +73,8 @@ struct VictoriaParkOptions {
   // and 15 s and 20 s both give 35.9 deg (public code uses 35.5 or 36 deg). Longer windows
   // take in the dead reckoning's own heading drift (38.5 deg at 60 s, fit RMS 1.9 m), and
   // no filter can undo a wrong start heading: FastSLAM's path then comes out rotated against
-  // GPS by about that difference (FS1, M = 100: -2.9 deg and GPS RMSE 6.7 m with 60 s,
-  // -0.7 deg and 3.4 m with 20 s; docs/victoria-park.md).
+  // GPS by about that difference (FS1, M = 100, no negative information, seed 1: rotated
+  // -2.9 deg, GPS RMSE 6.7 m with 60 s; -0.7 deg, 3.2 m with 20 s; docs/victoria-park.md).
   std::optional<double> initial_heading;  // rad
   double heading_fit_seconds = 20.0;
   // Cut the control interval that contains a scan time into two controls (same speed and
