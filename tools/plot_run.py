@@ -77,6 +77,8 @@ def main():
         title = "{} M={} {} association, seed {}".format(
             metrics.get("algorithm"), metrics.get("particles"), metrics.get("association"),
             metrics.get("seed"))
+        if metrics.get("motion") == "none":
+            title += ", no odometry"
         if errors:
             title += ": " + ", ".join(errors)
     ax.set_title(title, fontsize=10)
