@@ -38,22 +38,18 @@ int run_memory_demo(const MemoryDemoOptions& options) {
   const std::uint64_t n = options.landmarks;
   const std::uint32_t m = options.particles;
 
-  std::printf(
-      "memory-demo: N = %llu landmarks, M = %u particles, %u steps, K = %u updates per "
-      "particle per step, %d threads\n",
-      static_cast<unsigned long long>(n), m, options.steps, options.updates_per_step, threads);
+  std::printf("memory-demo: N = %llu landmarks, M = %u particles, %u steps, K = %u updates per "
+              "particle per step, %d threads\n",
+              static_cast<unsigned long long>(n), m, options.steps, options.updates_per_step,
+              threads);
 
   nlohmann::json metrics;
   {
     auto start = Clock::now();
     memory::LandmarkTree base(heap);
     for (std::uint64_t i = 0; i < n; ++i) {
-      base.insert({.x = static_cast<double>(i % 1000),
-                   .y = static_cast<double>(i / 1000),
-                   .sxx = 1.0,
-                   .syy = 1.0,
-                   .log_odds = 1.0,
-                   .id = i});
+      base.insert({.x = static_cast<double>(i % 1000), .y = static_cast<double>(i / 1000),
+                   .sxx = 1.0, .syy = 1.0, .log_odds = 1.0, .id = i});
     }
     const memory::HeapStats one_map = heap.stats();
     const double build_seconds = seconds_since(start);
@@ -71,20 +67,20 @@ int run_memory_demo(const MemoryDemoOptions& options) {
     for (std::uint32_t step = 0; step < options.steps; ++step) {
       auto t0 = Clock::now();
       arena.execute([&] {
-        tbb::parallel_for(
-            tbb::blocked_range<std::uint32_t>(0, m, 8),
-            [&](const tbb::blocked_range<std::uint32_t>& r) {
-              for (std::uint32_t p = r.begin(); p != r.end(); ++p) {
-                parallel::RandomStream rng({options.seed, step, p, parallel::Purpose::kUser});
-                memory::LandmarkTree& map = store.map(p);
-                for (std::uint32_t k = 0; k < options.updates_per_step; ++k) {
-                  const auto slot = static_cast<memory::Slot>(rng.next_u64() % n);
-                  memory::Landmark& landmark = map.edit(slot);
-                  landmark.x += 0.01 * rng.normal();
-                  landmark.last_seen = step;
-                }
-              }
-            });
+        tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, m, 8),
+                          [&](const tbb::blocked_range<std::uint32_t>& r) {
+                            for (std::uint32_t p = r.begin(); p != r.end(); ++p) {
+                              parallel::RandomStream rng(
+                                  {options.seed, step, p, parallel::Purpose::kUser});
+                              memory::LandmarkTree& map = store.map(p);
+                              for (std::uint32_t k = 0; k < options.updates_per_step; ++k) {
+                                const auto slot = static_cast<memory::Slot>(rng.next_u64() % n);
+                                memory::Landmark& landmark = map.edit(slot);
+                                landmark.x += 0.01 * rng.normal();
+                                landmark.last_seen = step;
+                              }
+                            }
+                          });
       });
       auto t1 = Clock::now();
       parallel::RandomStream pick({options.seed, step, 0, parallel::Purpose::kResample});
@@ -97,12 +93,12 @@ int run_memory_demo(const MemoryDemoOptions& options) {
     const memory::HeapStats final_stats = heap.stats();
     const double linear_bytes = static_cast<double>(n) * sizeof(memory::Landmark) * m;
     const double updates = static_cast<double>(options.steps) * m * options.updates_per_step;
-    std::printf(
-        "  live after %u steps: %.1f MiB in %lld nodes (%.2fx one map; the linear "
-        "baseline, a whole map per particle, holds %.1f MiB: %.0fx more)\n",
-        options.steps, mib(final_stats.live_bytes), static_cast<long long>(final_stats.live_nodes),
-        static_cast<double>(final_stats.live_bytes) / one_map.live_bytes,
-        linear_bytes / (1024.0 * 1024.0), linear_bytes / final_stats.live_bytes);
+    std::printf("  live after %u steps: %.1f MiB in %lld nodes (%.2fx one map; the linear "
+                "baseline, a whole map per particle, holds %.1f MiB: %.0fx more)\n",
+                options.steps, mib(final_stats.live_bytes),
+                static_cast<long long>(final_stats.live_nodes),
+                static_cast<double>(final_stats.live_bytes) / one_map.live_bytes,
+                linear_bytes / (1024.0 * 1024.0), linear_bytes / final_stats.live_bytes);
     std::printf("  %.0f ns per landmark update (path copy), %.3f ms per resampling gather\n",
                 updates > 0 ? 1e9 * update_seconds / updates : 0.0,
                 1e3 * resample_seconds / options.steps);

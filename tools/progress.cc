@@ -1,8 +1,9 @@
 #include "tools/progress.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
-#include <unistd.h>
 
 namespace fastslam::tools {
 namespace {

@@ -51,8 +51,8 @@ bool Simulator::next(SimStep& step) {
   // compute_steering.m: switch waypoints within at_waypoint; past the last one, start the next
   // loop or finish (the finishing step still drives and observes, as in the original).
   const Point* target = &world_->waypoints[waypoint_];
-  const double d2 =
-      (target->x - pose_.x) * (target->x - pose_.x) + (target->y - pose_.y) * (target->y - pose_.y);
+  const double d2 = (target->x - pose_.x) * (target->x - pose_.x) +
+                    (target->y - pose_.y) * (target->y - pose_.y);
   bool steer_update = true;
   if (d2 < config_.at_waypoint * config_.at_waypoint) {
     ++waypoint_;
@@ -65,8 +65,7 @@ bool Simulator::next(SimStep& step) {
     }
   }
   if (steer_update) {
-    double delta =
-        wrap(std::atan2(target->y - pose_.y, target->x - pose_.x) - pose_.theta - steer_);
+    double delta = wrap(std::atan2(target->y - pose_.y, target->x - pose_.x) - pose_.theta - steer_);
     const double max_delta = config_.steer_rate * config_.dt;
     if (std::abs(delta) > max_delta) delta = std::copysign(max_delta, delta);
     steer_ += delta;

@@ -20,22 +20,22 @@ namespace fastslam::tools {
 
 // Defaults: ../shared/data/bailey_sim/README.md (configfile.m).
 struct SimConfig {
-  double speed = 3.0;                                 // V, m/s
-  double max_steer = 30.0 * std::numbers::pi / 180;   // MAXG, rad
-  double steer_rate = 20.0 * std::numbers::pi / 180;  // RATEG, rad/s
-  double wheelbase = 4.0;                             // m
-  double dt = 0.025;                                  // DT_CONTROLS, s
-  double sigma_v = 0.3;                               // m/s
-  double sigma_steer = 3.0 * std::numbers::pi / 180;  // rad
-  double max_range = 30.0;                            // m
+  double speed = 3.0;                                  // V, m/s
+  double max_steer = 30.0 * std::numbers::pi / 180;    // MAXG, rad
+  double steer_rate = 20.0 * std::numbers::pi / 180;   // RATEG, rad/s
+  double wheelbase = 4.0;                              // m
+  double dt = 0.025;                                   // DT_CONTROLS, s
+  double sigma_v = 0.3;                                // m/s
+  double sigma_steer = 3.0 * std::numbers::pi / 180;   // rad
+  double max_range = 30.0;                             // m
   double min_range = 0.5;  // m: nearer landmarks are not seen (inside the vehicle; and a noisy
                            // range there could come out negative)
-  double field_of_view = std::numbers::pi;  // rad, centred ahead (Bailey: the front half)
-  double dt_observe = 8 * 0.025;            // DT_OBSERVE, s
-  double sigma_range = 0.1;                 // m
-  double sigma_bearing = 1.0 * std::numbers::pi / 180;  // rad
-  double at_waypoint = 1.0;                             // m
-  int loops = 2;                                        // NUMBER_LOOPS
+  double field_of_view = std::numbers::pi;             // rad, centred ahead (Bailey: the front half)
+  double dt_observe = 8 * 0.025;                       // DT_OBSERVE, s
+  double sigma_range = 0.1;                            // m
+  double sigma_bearing = 1.0 * std::numbers::pi / 180; // rad
+  double at_waypoint = 1.0;                            // m
+  int loops = 2;                                       // NUMBER_LOOPS
   bool control_noise = true;
   bool sensor_noise = true;
   // False alarms: a Poisson number per scan with this mean, uniform over the footprint's area
@@ -54,8 +54,8 @@ inline constexpr std::uint32_t kClutter = 0xFFFFFFFFu;
 
 struct SimObservation {
   double range = 0.0;
-  double bearing = 0.0;        // wrapped to (-pi, pi]
-  std::uint32_t landmark = 0;  // index into World::landmarks (the true correspondence), or kClutter
+  double bearing = 0.0;       // wrapped to (-pi, pi]
+  std::uint32_t landmark = 0; // index into World::landmarks (the true correspondence), or kClutter
 };
 
 // One control step: the (noisy) control the filter sees, the truth after it, and the scan taken

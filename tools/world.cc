@@ -3,10 +3,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <nanoflann.hpp>
 #include <numbers>
 #include <stdexcept>
 #include <string>
+
+#include <nanoflann.hpp>
 
 #include "parallel/random_stream.h"
 #include "tools/csv.h"

@@ -1,5 +1,7 @@
 #include "tools/log_format.h"
 
+#include <unistd.h>
+
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -9,7 +11,6 @@
 #include <random>
 #include <sstream>
 #include <string>
-#include <unistd.h>
 #include <utility>
 #include <vector>
 

@@ -39,8 +39,7 @@ TEST(TruthIndex, AgreesWithBruteForce) {
     ASSERT_EQ(found, brute_within(points, x, y, radius)) << "query " << q;
     const auto [nearest, d2] = index.nearest(x, y);
     double best = INFINITY;
-    for (const Point& p : points)
-      best = std::min(best, (p.x - x) * (p.x - x) + (p.y - y) * (p.y - y));
+    for (const Point& p : points) best = std::min(best, (p.x - x) * (p.x - x) + (p.y - y) * (p.y - y));
     EXPECT_DOUBLE_EQ(d2, best);
     EXPECT_DOUBLE_EQ((points[nearest].x - x) * (points[nearest].x - x) +
                          (points[nearest].y - y) * (points[nearest].y - y),
