@@ -665,7 +665,7 @@ int convert_to_log(const RunOptions& options) {
     if (options.data.empty()) {
       throw std::invalid_argument("--source victoria-park needs --data DIR");
     }
-    const VictoriaPark vp = read_victoria_park(options.data);
+    const VictoriaPark vp = read_victoria_park(options.data, options.victoria_park);
     write_log(partial, vp.log);
     events = vp.log.events.size();
     std::printf(
