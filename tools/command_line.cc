@@ -1,6 +1,7 @@
 #include "tools/command_line.h"
 
 #include <fstream>
+#include <numbers>
 #include <stdexcept>
 
 #include <nlohmann/json.hpp>
@@ -77,6 +78,11 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
       ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
       ->capture_default_str();
+  cmd.add_option("--motion", o.motion,
+                 "odometry: the source's motion model; none: ignore the controls, Brownian "
+                 "velocities (eq. 79-81; --sigma-u0/--sigma-u1 are the v and omega increments)")
+      ->check(CLI::IsMember({"odometry", "none"}))
+      ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(CLI::Range(1U, 100'000'000U))
       ->capture_default_str();
@@ -152,6 +158,14 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "filter noise of the second control component (steering rad, omega, the omega "
                  "increment; default: the source's)")
       ->check(CLI::NonNegativeNumber);
+  cmd.add_option("--initial-heading-deg", w.initial_heading_deg,
+                 "start heading, degrees (default: the source's; victoria-park fits it to GPS)");
+  cmd.add_option("--heading-fit-seconds", o.victoria_park.heading_fit_seconds,
+                 "victoria-park: seconds of GPS after the first fix the start heading is fitted to")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("--split-controls", o.victoria_park.split_controls_at_scans,
+               "victoria-park: cut the odometry interval holding a scan at the scan time");
   cmd.add_option("--out", o.out,
                  "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
   cmd.add_option("--trace", o.trace,
@@ -242,6 +256,20 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   if (given("--sigma-bearing")) o.noise.sigma_bearing = w.sigma_bearing;
   if (given("--sigma-u0")) o.noise.sigma_control0 = w.sigma_control0;
   if (given("--sigma-u1")) o.noise.sigma_control1 = w.sigma_control1;
+  if (o.source == "victoria-park") {
+    const VictoriaParkFilterDefaults vp;
+    if (!given("--existence-range-margin")) {
+      o.filter.existence.range_margin = vp.existence_range_margin;
+    }
+    if (!given("--existence-missed")) o.filter.existence.missed = vp.existence_missed;
+    if (o.filter.algorithm == Algorithm::kFastSlam2) {
+      if (!given("--sigma-range")) o.noise.sigma_range = vp.fastslam2_sigma_range;
+      if (!given("--sigma-bearing")) o.noise.sigma_bearing = vp.fastslam2_sigma_bearing;
+    }
+  }
+  if (given("--initial-heading-deg")) {
+    o.initial_heading = w.initial_heading_deg * std::numbers::pi / 180;
+  }
 }
 
 }  // namespace fastslam::tools

@@ -29,6 +29,7 @@ struct RunWords {
   std::string resample = "neff";
   std::string scheme = "systematic";
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
+  double initial_heading_deg = 0;
   std::string config;  // --config FILE.json
 };
 

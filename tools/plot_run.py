@@ -165,6 +165,8 @@ def main():
         if "true_landmarks" in metrics and "steps" in metrics:
             title += ", {} landmarks, {} steps".format(metrics["true_landmarks"],
                                                        metrics["steps"])
+        if metrics.get("motion") == "none":
+            title += ", no odometry"
         if errors:
             title += ":\n" + ", ".join(errors)
     ax.set_title(title, fontsize=10)

@@ -1,6 +1,7 @@
 #include "tools/run_command.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -171,18 +172,46 @@ std::vector<TruthLandmark> truth_landmarks(const World& world) {
   return out;
 }
 
+// Where the source's pose (the point its log and its GPS refer to) is relative to the point the
+// filter tracks: zero, except without odometry on Victoria Park. There the log's state is the
+// laser's pose, 3.78 m ahead of the rear axle and 0.5 m left of it, and the laser does not move
+// along its heading when the car turns (its sideslip reaches ~40 deg in tight turns), which the
+// Brownian model (eq. 81: x += v cos(theta) dt) assumes; the rear axle's centre does. So the
+// filter tracks the axle, the sensor sits at (a, b) from it, and the trajectory is reported at
+// the laser again.
+engine::SensorOffset tracked_point_offset(const RunOptions& o, const LogHeader& h) {
+  if (o.motion != "none" || h.motion.kind != engine::MotionKind::kVictoriaPark) return {};
+  return {h.motion.geometry.a, h.motion.geometry.b, 0.0};
+}
+
 // The filter's configuration: the options' algorithm, particles, ...; the models of the
 // source's header; the noise overrides.
 engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
   engine::FilterConfig config = o.filter;
   config.record_trajectory = true;
   config.motion = h.motion;
+  if (o.motion == "none") {
+    config.motion.kind = engine::MotionKind::kBrownian;
+    config.motion.sigma_control[0] = o.no_odometry_sigma[0];
+    config.motion.sigma_control[1] = o.no_odometry_sigma[1];
+  } else if (o.motion != "odometry") {
+    throw std::invalid_argument("--motion '" + o.motion + "' is not supported (odometry or none)");
+  }
   config.sensor = h.sensor;
   if (o.noise.sigma_range) config.sensor.sigma_range = *o.noise.sigma_range;
   if (o.noise.sigma_bearing) config.sensor.sigma_bearing = *o.noise.sigma_bearing;
   if (o.noise.sigma_control0) config.motion.sigma_control[0] = *o.noise.sigma_control0;
   if (o.noise.sigma_control1) config.motion.sigma_control[1] = *o.noise.sigma_control1;
   for (int k = 0; k < 5; ++k) config.initial_pose[k] = k < 3 ? h.start_pose[k] : 0.0;
+  if (o.initial_heading) config.initial_pose[2] = engine::wrap_angle(*o.initial_heading);
+  const engine::SensorOffset axle = tracked_point_offset(o, h);
+  if (axle.x != 0.0 || axle.y != 0.0) {
+    // The filter tracks the rear axle; the sensor (the source's pose) sits at `axle` from it.
+    config.sensor.offset = axle;
+    const double th = config.initial_pose[2];
+    config.initial_pose[0] -= axle.x * std::cos(th) - axle.y * std::sin(th);
+    config.initial_pose[1] -= axle.x * std::sin(th) + axle.y * std::cos(th);
+  }
   return config;
 }
 
@@ -225,6 +254,50 @@ Errors position_errors(const std::vector<StampedPose>& estimate,
   }
   e.rmse = e.used == 0 ? 0.0 : std::sqrt(se / e.used);
   return e;
+}
+
+// The position RMSE after the rigid motion (rotation and translation, no scale) that best
+// aligns the estimate with the reference (closed-form least squares, as Horn/Umeyama in 2-D).
+// It separates the error of the shape of the path from that of its placement, which for a
+// source without absolute heading comes from the start pose (Victoria Park: the heading fitted
+// to early GPS; 1 deg there moves the far end of the park by about 5 m).
+struct AlignedErrors {
+  double rmse = 0.0;
+  double rotation = 0.0;  // rad, applied to the estimate
+};
+
+AlignedErrors aligned_position_errors(const std::vector<StampedPose>& estimate,
+                                      const std::vector<StampedPose>& reference) {
+  std::vector<std::array<double, 4>> pairs;  // estimate x, y; reference x, y
+  for (const StampedPose& r : reference) {
+    if (const std::optional<StampedPose> p = pose_at(estimate, r.time)) {
+      pairs.push_back({p->x, p->y, r.x, r.y});
+    }
+  }
+  AlignedErrors out;
+  if (pairs.empty()) return out;
+  double me[2] = {0, 0}, mr[2] = {0, 0};
+  for (const auto& [ex, ey, rx, ry] : pairs) {
+    me[0] += ex, me[1] += ey, mr[0] += rx, mr[1] += ry;
+  }
+  const auto n = static_cast<double>(pairs.size());
+  for (double* m : {me, mr}) m[0] /= n, m[1] /= n;
+  double cross = 0.0, dot = 0.0;
+  for (const auto& [ex, ey, rx, ry] : pairs) {
+    const double ax = ex - me[0], ay = ey - me[1], bx = rx - mr[0], by = ry - mr[1];
+    cross += ax * by - ay * bx;
+    dot += ax * bx + ay * by;
+  }
+  out.rotation = std::atan2(cross, dot);
+  const double c = std::cos(out.rotation), sn = std::sin(out.rotation);
+  double se = 0.0;
+  for (const auto& [ex, ey, rx, ry] : pairs) {
+    const double ax = ex - me[0], ay = ey - me[1];
+    se +=
+        std::pow(c * ax - sn * ay - (rx - mr[0]), 2) + std::pow(sn * ax + c * ay - (ry - mr[1]), 2);
+  }
+  out.rmse = std::sqrt(se / n);
+  return out;
 }
 
 // Landmark RMSE of the estimated map under known association: each against its true landmark.
@@ -297,7 +370,7 @@ Source open_source(const RunOptions& o) {
       throw std::invalid_argument(
           "--source victoria-park needs --data DIR (../shared/data/victoria_park)");
     }
-    s.log = std::make_unique<Log>(read_victoria_park(o.data).log);
+    s.log = std::make_unique<Log>(read_victoria_park(o.data, o.victoria_park).log);
     s.header = s.log->header;
     s.events = std::make_unique<LogSource>(*s.log);
     for (const Event& e : s.log->events) s.expected_controls += e.kind == EventKind::kControl;
@@ -480,11 +553,15 @@ int run_simulation(const RunOptions& options) {
   trajectory.reserve(points.size() + 1);
   trajectory.push_back({source.header.start_time, source.header.start_pose[0],
                         source.header.start_pose[1], source.header.start_pose[2]});
+  const engine::SensorOffset reported = tracked_point_offset(options, source.header);
   for (const engine::TrajectoryPoint& p : points) {
-    trajectory.push_back({control_times.at(p.control), p.x, p.y, p.theta});
+    const double c = std::cos(p.theta), sn = std::sin(p.theta);
+    trajectory.push_back({control_times.at(p.control), p.x + reported.x * c - reported.y * sn,
+                          p.y + reported.x * sn + reported.y * c, p.theta});
   }
   const Errors pose = position_errors(trajectory, truth);
   const Errors fixes = position_errors(trajectory, gps);
+  const AlignedErrors aligned = aligned_position_errors(trajectory, gps);
   // Known ids: each landmark against its own. Unknown: paired with the truth by distance
   // (tools/map_evaluation.h), which also counts spurious and missing landmarks.
   const MapScore score =
@@ -551,6 +628,9 @@ int run_simulation(const RunOptions& options) {
     metrics["final_gps_error_m"] = fixes.last;
     metrics["gps_fixes_used"] = fixes.used;
     metrics["gps_fixes_skipped"] = fixes.skipped;
+    metrics["gps_rmse_aligned_m"] = aligned.rmse;
+    metrics["gps_alignment_rotation_deg"] = aligned.rotation * 180 / std::numbers::pi;
+    metrics["initial_heading_deg"] = config.initial_pose[2] * 180 / std::numbers::pi;
   }
   std::printf("%s, M = %u, %s association, seed %llu: %llu steps, %llu scans, %zu landmarks\n",
               std::string(engine::to_string(config.algorithm)).c_str(), particles,
@@ -562,8 +642,11 @@ int run_simulation(const RunOptions& options) {
   if (!truth.empty()) std::printf(" pose RMSE %.3f m,", pose.rmse);
   if (!source.landmarks.empty()) std::printf(" landmark RMSE %.3f m,", map_rmse);
   if (!gps.empty()) {
-    std::printf(" GPS RMSE %.3f m (%zu fixes, %zu skipped), at the end %.3f m,", fixes.rmse,
-                fixes.used, fixes.skipped, fixes.last);
+    std::printf(
+        " GPS RMSE %.3f m (%zu fixes, %zu skipped), at the end %.3f m, %.3f m after a "
+        "rigid alignment (rotation %.2f deg),",
+        fixes.rmse, fixes.used, fixes.skipped, fixes.last, aligned.rmse,
+        aligned.rotation * 180 / std::numbers::pi);
   }
   std::printf(" filter %.3f s (%s %.3f s)\n", filter_seconds,
               options.source == "sim" ? "simulator" : "reading", source_seconds);
@@ -667,7 +750,7 @@ int convert_to_log(const RunOptions& options) {
     if (options.data.empty()) {
       throw std::invalid_argument("--source victoria-park needs --data DIR");
     }
-    const VictoriaPark vp = read_victoria_park(options.data);
+    const VictoriaPark vp = read_victoria_park(options.data, options.victoria_park);
     write_log(partial, vp.log);
     events = vp.log.events.size();
     std::printf(

@@ -76,16 +76,6 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
     }
     if (odometry.empty()) reader.fail("no odometry rows");
   }
-  for (std::size_t k = 0; k < odometry.size(); ++k) {
-    const bool last = k + 1 == odometry.size();
-    Event e;
-    e.kind = EventKind::kControl;
-    e.time = last ? odometry[k].time + kOdometryPeriod : odometry[k + 1].time;
-    e.dt = last ? kOdometryPeriod : odometry[k + 1].time - odometry[k].time;
-    e.control = {odometry[k].speed, odometry[k].steer};
-    events.push_back(e);
-  }
-  out.odometry_samples = odometry.size();
 
   // Every scan, with its detection count, from laser_scan_times.csv.
   std::vector<double> scan_time;
@@ -162,6 +152,35 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
     }
     close_scans_before(scan_time.size());
   }
+
+  // The controls: sample k held over [t_k, t_{k+1}), stamped at the end; with
+  // split_controls_at_scans, cut at every scan time inside that interval.
+  {
+    std::size_t next_scan = 0;
+    for (std::size_t k = 0; k < odometry.size(); ++k) {
+      const bool last = k + 1 == odometry.size();
+      const double begin = odometry[k].time;
+      const double end = last ? begin + kOdometryPeriod : odometry[k + 1].time;
+      Event e;
+      e.kind = EventKind::kControl;
+      e.control = {odometry[k].speed, odometry[k].steer};
+      double from = begin;
+      if (options.split_controls_at_scans) {
+        while (next_scan < scan_time.size() && scan_time[next_scan] <= begin) ++next_scan;
+        for (; next_scan < scan_time.size() && scan_time[next_scan] < end; ++next_scan) {
+          e.time = scan_time[next_scan];
+          e.dt = e.time - from;
+          events.push_back(e);
+          from = e.time;
+          ++out.split_controls;
+        }
+      }
+      e.time = end;
+      e.dt = from == begin && last ? kOdometryPeriod : end - from;  // exact when not cut
+      events.push_back(e);
+    }
+  }
+  out.odometry_samples = odometry.size();
 
   std::vector<Fix> gps;
   {

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <string>
 #include <unistd.h>
 
@@ -139,6 +140,42 @@ TEST_F(CommandLine, SimulatorNoiseAndTraceOptions) {
   EXPECT_NE(error_of("{}", "--sim-sigma-speed -1").find("sim-sigma-speed"), std::string::npos);
   EXPECT_NE(error_of("{}", "--sim-sigma-range 0").find("sim-sigma-range"), std::string::npos);
   EXPECT_NE(error_of("{}", "--trace-every 0").find("trace-every"), std::string::npos);
+}
+
+// --source victoria-park brings its negative-information preset (tools/victoria_park.h) for the
+// options not given; a flag or a config key still wins; other sources keep the engine's.
+TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
+  const VictoriaParkFilterDefaults vp;
+  const engine::ExistenceConfig engine_defaults;
+  RunOptions o = run("{}", "--source victoria-park");
+  EXPECT_EQ(o.filter.existence.range_margin, vp.existence_range_margin);
+  EXPECT_EQ(o.filter.existence.missed, vp.existence_missed);
+  EXPECT_NE(vp.existence_range_margin, engine_defaults.range_margin);  // the test can fail
+  o = run(R"({"existence-range-margin": 2.5})", "--source victoria-park --existence-missed 1");
+  EXPECT_EQ(o.filter.existence.range_margin, 2.5);
+  EXPECT_EQ(o.filter.existence.missed, 1.0);
+  EXPECT_FALSE(o.noise.sigma_range.has_value());  // FastSLAM 1.0: the header's noises
+  o = run("{}", "--source victoria-park --algorithm fastslam2 --sigma-range 0.7");
+  EXPECT_EQ(*o.noise.sigma_range, 0.7);
+  EXPECT_EQ(*o.noise.sigma_bearing, vp.fastslam2_sigma_bearing);
+  o = run("{}", "--source sim --algorithm fastslam2");
+  EXPECT_FALSE(o.noise.sigma_bearing.has_value());
+  EXPECT_EQ(o.filter.existence.range_margin, engine_defaults.range_margin);
+  EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
+}
+
+TEST_F(CommandLine, MotionNoneAndTheStartHeading) {
+  RunOptions o = run("{}", "");
+  EXPECT_EQ(o.motion, "odometry");
+  EXPECT_FALSE(o.initial_heading.has_value());
+  o = run(R"({"motion": "none"})", "--initial-heading-deg 90 --heading-fit-seconds 12");
+  EXPECT_EQ(o.motion, "none");
+  ASSERT_TRUE(o.initial_heading.has_value());
+  EXPECT_DOUBLE_EQ(*o.initial_heading, std::numbers::pi / 2);
+  EXPECT_EQ(o.victoria_park.heading_fit_seconds, 12.0);
+  EXPECT_NE(error_of("{}", "--motion bogus").find("--motion"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--heading-fit-seconds 0").find("--heading-fit-seconds"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <sstream>
 #include <string>
 #include <unordered_map>
@@ -12,6 +13,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "engine/motion_model.h"
 #include "tests/shared_data.h"
 #include "tools/log_format.h"
 
@@ -299,6 +301,107 @@ TEST(RunCommand, GpsAndPoseErrorsInterpolateAndSkipGaps) {
   EXPECT_FALSE(m.contains("landmark_rmse_m"));  // the log has no true landmarks
   EXPECT_EQ(line_count(o.out + "/gps.csv"), 6u + 1);
   EXPECT_EQ(line_count(o.out + "/trajectory.tum"), 101u + 1);
+  std::filesystem::remove_all(o.out);
+  std::filesystem::remove(path);
+}
+
+// A start heading override rotates the whole (noise-free) path about the start: the GPS fixes,
+// taken on the path with the log's own heading 0, are then off by the rotation, which the
+// rigid alignment takes out exactly (oracle: the same unicycle integrated here).
+TEST(RunCommand, StartHeadingOverrideAndTheAlignedGpsError) {
+  Log log;
+  log.header.motion.kind = engine::MotionKind::kUnicycle;
+  log.header.motion.sigma_control[0] = 0.0;
+  log.header.motion.sigma_control[1] = 0.0;
+  const engine::UnicycleModel model;
+  engine::UnicycleModel::State s(0.0, 0.0, 0.0);
+  double rotated_se = 0.0;  // |R(30 deg) p - p|^2 = (2 sin 15 deg |p|)^2 summed over the fixes
+  int fixes = 0;
+  for (int k = 1; k <= 200; ++k) {
+    Event c;
+    c.kind = EventKind::kControl;
+    c.time = k / 10.0;
+    c.dt = 0.1;
+    c.control = {2.0, 0.3};  // a curve, so the rotation is determined
+    log.events.push_back(c);
+    s = model.predict(s, {c.control.u0, c.control.u1}, c.dt);
+    if (k % 10 == 0) {
+      Event g;
+      g.kind = EventKind::kGps;
+      g.time = c.time;
+      g.x = s[0];
+      g.y = s[1];
+      log.events.push_back(g);
+      rotated_se += std::pow(2 * std::sin(std::numbers::pi / 12), 2) * (s[0] * s[0] + s[1] * s[1]);
+      ++fixes;
+    }
+  }
+  const std::string path = temp_dir("heading") + ".log";
+  write_log(path, log);
+  RunOptions o;
+  o.progress = false;
+  o.source = "log";
+  o.data = path;
+  o.filter.particles = 2;
+  o.out = temp_dir("heading_run");
+  ASSERT_EQ(run_simulation(o), 0);
+  nlohmann::json m = read_metrics(o.out);
+  EXPECT_NEAR(m["gps_rmse_m"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(m["gps_rmse_aligned_m"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(m["initial_heading_deg"].get<double>(), 0.0, 0.0);
+  o.initial_heading = std::numbers::pi / 6;  // 30 deg
+  ASSERT_EQ(run_simulation(o), 0);
+  m = read_metrics(o.out);
+  EXPECT_NEAR(m["gps_rmse_m"].get<double>(), std::sqrt(rotated_se / fixes), 1e-9);
+  EXPECT_GT(m["gps_rmse_m"].get<double>(), 4.0);
+  EXPECT_NEAR(m["gps_rmse_aligned_m"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(m["gps_alignment_rotation_deg"].get<double>(), -30.0, 1e-9);
+  EXPECT_NEAR(m["initial_heading_deg"].get<double>(), 30.0, 1e-12);
+  std::filesystem::remove_all(o.out);
+  std::filesystem::remove(path);
+}
+
+// --motion none on a Victoria Park log: the filter tracks the rear axle, with the laser (the
+// log's pose) at (a, b) from it, and reports the laser again. With zero noise and the car at
+// rest the laser must stay exactly at the start, whatever the heading (a wrong sign or a
+// missing conversion moves it by up to 2 sqrt(a^2 + b^2) = 7.6 m).
+TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
+  Log log;
+  log.header.motion.kind = engine::MotionKind::kVictoriaPark;
+  log.header.start_pose[0] = 10.0;
+  log.header.start_pose[1] = -4.0;
+  log.header.start_pose[2] = 2.0;
+  for (int k = 1; k <= 20; ++k) {
+    Event c;
+    c.kind = EventKind::kControl;
+    c.time = k * 0.025;
+    c.dt = 0.025;
+    c.control = {3.0, 0.2};  // ignored without odometry
+    log.events.push_back(c);
+  }
+  Event g;
+  g.kind = EventKind::kGps;
+  g.time = 0.5;
+  g.x = 10.0;
+  g.y = -4.0;
+  log.events.push_back(g);
+  const std::string path = temp_dir("none") + ".log";
+  write_log(path, log);
+  RunOptions o;
+  o.progress = false;
+  o.source = "log";
+  o.data = path;
+  o.filter.particles = 2;
+  o.motion = "none";
+  o.no_odometry_sigma[0] = o.no_odometry_sigma[1] = 0.0;
+  o.out = temp_dir("none_run");
+  ASSERT_EQ(run_simulation(o), 0);
+  const nlohmann::json m = read_metrics(o.out);
+  EXPECT_EQ(m["motion"], "none");
+  EXPECT_EQ(m["gps_fixes_used"], 1);
+  EXPECT_NEAR(m["gps_rmse_m"].get<double>(), 0.0, 1e-9);
+  o.motion = "sideways";
+  EXPECT_THROW(run_simulation(o), std::invalid_argument);
   std::filesystem::remove_all(o.out);
   std::filesystem::remove(path);
 }

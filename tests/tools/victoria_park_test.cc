@@ -1,13 +1,12 @@
 #include "tools/victoria_park.h"
 
-#include <unistd.h>
-
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
 #include <string>
+#include <unistd.h>
 #include <utility>
 #include <vector>
 
@@ -72,8 +71,10 @@ TEST_F(VictoriaParkFiles, ReadsEveryRecordInTimeOrder) {
   write(files_);
   VictoriaParkOptions options;
   options.heading_fit_seconds = 1.0;
+  options.split_controls_at_scans = false;
   const VictoriaPark vp = read_victoria_park(dir_, options);
   EXPECT_EQ(vp.odometry_samples, 8u);
+  EXPECT_EQ(vp.split_controls, 0u);
   EXPECT_EQ(vp.scans, 3u);
   EXPECT_EQ(vp.detections, 5u);
   EXPECT_EQ(vp.gated_out, 3u);  // 3 m and 71 m outside 5..70 m, 1.55 rad beyond 87.1 deg
@@ -116,6 +117,45 @@ TEST_F(VictoriaParkFiles, ReadsEveryRecordInTimeOrder) {
   // recovers it (the laser point moves straight when steering is 0).
   EXPECT_NEAR(vp.initial_heading, std::atan2(0.05, 0.15), 1e-9);
   EXPECT_NEAR(h.start_pose[2], vp.initial_heading, 0.0);
+}
+
+// Every scan falls inside an odometry interval (1.010 in [1.000, 1.025), ...): each such
+// interval becomes two controls, one ending at the scan, and the scan comes right after it.
+TEST_F(VictoriaParkFiles, SplitsTheControlHoldingAScanAtTheScanTime) {
+  write(files_);
+  VictoriaParkOptions options;
+  options.initial_heading = 0.0;
+  options.split_controls_at_scans = true;
+  const VictoriaPark vp = read_victoria_park(dir_, options);
+  EXPECT_EQ(vp.odometry_samples, 8u);
+  EXPECT_EQ(vp.split_controls, 3u);
+  const std::vector<Event>& events = vp.log.events;
+  std::size_t controls = 0;
+  double driven = 0.0;
+  for (std::size_t i = 0; i < events.size(); ++i) {
+    const Event& e = events[i];
+    if (e.kind == EventKind::kControl) {
+      ++controls;
+      driven += e.control.u0 * e.dt;
+      EXPECT_GT(e.dt, 0.0);
+    }
+    if (e.kind == EventKind::kScan) {
+      ASSERT_GT(i, 0u);
+      EXPECT_EQ(events[i - 1].kind, EventKind::kControl);
+      EXPECT_EQ(events[i - 1].time, e.time);  // the pose is at the scan's own time
+    }
+  }
+  EXPECT_EQ(controls, 8u + 3);
+  EXPECT_NEAR(driven, 2.0 * 8 * 0.025, 1e-12);  // the same intervals, cut, not changed
+  // The first sample [1.000, 1.025) cut at 1.010: the GPS fix at 0.990, the first part, the
+  // scan, the rest.
+  ASSERT_GE(events.size(), 4u);
+  EXPECT_EQ(events[0].kind, EventKind::kGps);
+  EXPECT_EQ(events[1].time, 1.010);
+  EXPECT_NEAR(events[1].dt, 0.010, 1e-12);
+  EXPECT_EQ(events[2].kind, EventKind::kScan);
+  EXPECT_EQ(events[3].time, 1.025);
+  EXPECT_NEAR(events[3].dt, 0.015, 1e-12);
 }
 
 TEST_F(VictoriaParkFiles, GateAndHeadingAreOptions) {
@@ -213,7 +253,9 @@ TEST_F(VictoriaParkFiles, RefusesEveryMalformedClassNamingFileLineAndReason) {
 
 TEST(VictoriaParkData, CountsRangesAndHeadingOfTheSharedDataSet) {
   FASTSLAM_REQUIRE_SHARED(shared);
-  const VictoriaPark vp = read_victoria_park(shared + "/data/victoria_park");
+  VictoriaParkOptions options;
+  options.split_controls_at_scans = true;
+  const VictoriaPark vp = read_victoria_park(shared + "/data/victoria_park", options);
   // The counts of the README and the issue.
   EXPECT_EQ(vp.odometry_samples, 61945u);
   EXPECT_EQ(vp.scans, 7249u);
@@ -226,7 +268,10 @@ TEST(VictoriaParkData, CountsRangesAndHeadingOfTheSharedDataSet) {
     gps += e.kind == EventKind::kGps;
     empty += e.kind == EventKind::kScan && e.count == 0;
   }
-  EXPECT_EQ(controls, 61945u);
+  // A scan cuts the odometry interval it falls in, unless it falls on a sample's time (same
+  // millisecond clock) or before the first sample: 6960 of the 7249.
+  EXPECT_EQ(controls, 61945u + vp.split_controls);
+  EXPECT_EQ(vp.split_controls, 6960u);
   EXPECT_EQ(scans, 7249u);
   EXPECT_EQ(gps, 4466u);
   EXPECT_GE(empty, 19u);  // 19 scans have no detection at all, more after gating
@@ -243,14 +288,19 @@ TEST(VictoriaParkData, CountsRangesAndHeadingOfTheSharedDataSet) {
   EXPECT_EQ(vp.log.header.start_pose[0], -67.649271);
   EXPECT_EQ(vp.log.header.start_pose[1], -41.714218);
   EXPECT_NEAR(vp.log.events.back().time, 1570.540 + 0.025, 1e-9);
-  // Odometry is exactly 40 Hz: every control covers 25 ms.
+  // Odometry is exactly 40 Hz: every control covers 25 ms, or part of it when cut at a scan.
+  double covered = 0.0;
   for (const Event& e : vp.log.events) {
     if (e.kind == EventKind::kControl) {
-      ASSERT_NEAR(e.dt, 0.025, 1e-9);
+      ASSERT_GT(e.dt, 0.0);
+      ASSERT_LE(e.dt, 0.025 + 1e-9);
+      covered += e.dt;
     }
   }
-  // The README's own fit of the first 60 s gives 38.0 deg (public code uses 35.5 and 36).
-  EXPECT_NEAR(vp.initial_heading / kDeg, 38.0, 1.0);
+  EXPECT_NEAR(covered, 61945 * 0.025, 1e-6);
+  // The default 20 s window gives 35.9 deg (public code uses 35.5 and 36; the README's own fit
+  // of the first 60 s, 38.0 deg, takes in the dead reckoning's drift).
+  EXPECT_NEAR(vp.initial_heading / kDeg, 35.9, 0.3);
   EXPECT_LT(vp.heading_fit_rms_m, 3.0);
   std::printf("fitted initial heading %.2f deg, RMS %.2f m\n", vp.initial_heading / kDeg,
               vp.heading_fit_rms_m);
