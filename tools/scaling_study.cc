@@ -7,6 +7,7 @@
 #include <fstream>
 #include <stdexcept>
 #include <thread>
+#include <time.h>
 
 #include <nlohmann/json.hpp>
 
@@ -17,6 +18,14 @@
 
 namespace fastslam::tools {
 namespace {
+
+// CPU seconds of the whole process (every thread): on a shared machine a one-thread run's CPU
+// time is what the work cost, whatever share of a core it was given.
+double process_cpu_seconds() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
 struct Step {
   engine::Control control;
@@ -62,6 +71,7 @@ ScalingPoint run_linear_point(const engine::FilterConfig& config, const std::vec
   filter.set_map(prior);
   ScalingPoint p;
   p.lower_bound_bytes = static_cast<std::int64_t>(prior.size() * sizeof(memory::Landmark));
+  const double cpu0 = process_cpu_seconds();
   const auto t0 = std::chrono::steady_clock::now();
   for (const Step& step : steps) {
     filter.predict(step.control, step.dt);
@@ -69,6 +79,7 @@ ScalingPoint run_linear_point(const engine::FilterConfig& config, const std::vec
   }
   const engine::Pose mean = filter.mean_pose();
   p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  p.cpu_seconds = process_cpu_seconds() - cpu0;
   const LinearStatistics& st = filter.statistics();
   p.updates = st.scans;
   p.observations = st.observations;
@@ -119,6 +130,7 @@ ScalingPoint run_scaling_point(const ScalingOptions& options, std::uint64_t land
   p.threads = config.threads == 0 ? std::max(1u, std::thread::hardware_concurrency())
                                   : config.threads;
   p.lower_bound_bytes = filter.statistics().live_bytes;
+  const double cpu0 = process_cpu_seconds();
   const auto t0 = std::chrono::steady_clock::now();
   for (const Step& step : steps) {
     filter.predict(step.control, step.dt);
@@ -126,6 +138,7 @@ ScalingPoint run_scaling_point(const ScalingOptions& options, std::uint64_t land
   }
   const engine::Estimate estimate = filter.estimate();
   p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  p.cpu_seconds = process_cpu_seconds() - cpu0;
   if (!steps.empty()) {
     p.pose_error = std::hypot(estimate.mean_pose[0] - steps.back().truth.x,
                               estimate.mean_pose[1] - steps.back().truth.y);
@@ -171,6 +184,8 @@ nlohmann::json to_json(const ScalingPoint& p) {
           {"observations", p.observations},
           {"seconds", p.seconds},
           {"seconds_per_update", p.seconds_per_update},
+          {"cpu_seconds", p.cpu_seconds},
+          {"cpu_seconds_per_update", p.cpu_seconds / static_cast<double>(p.updates)},
           {"seconds_per_particle_update", p.seconds_per_update / p.particles},
           {"seconds_per_particle_observation", per_particle_observation(p)},
           {"live_bytes", p.live_bytes},
@@ -189,7 +204,7 @@ constexpr const char* kCsvHeader =
     "engine,algorithm,association,landmarks,particles,threads,updates,observations,seconds,"
     "seconds_per_update,seconds_per_particle_update,seconds_per_particle_observation,live_bytes,"
     "lower_bound_bytes,pose_error_m,predict_seconds,associate_seconds,update_seconds,"
-    "resample_seconds,observe_wall_seconds,repeats,slowest_seconds";
+    "resample_seconds,observe_wall_seconds,repeats,slowest_seconds,cpu_seconds";
 
 std::string csv_line(const ScalingOptions& options, const ScalingPoint& p) {
   char buf[768];
@@ -198,7 +213,7 @@ std::string csv_line(const ScalingOptions& options, const ScalingPoint& p) {
                              : *std::max_element(p.run_seconds.begin(), p.run_seconds.end());
   std::snprintf(buf, sizeof buf,
                 "%s,%s,%s,%llu,%u,%u,%llu,%llu,%.9g,%.9g,%.9g,%.9g,%lld,%lld,%.6g,%.9g,%.9g,%.9g,"
-                "%.9g,%.9g,%zu,%.9g",
+                "%.9g,%.9g,%zu,%.9g,%.9g",
                 std::string(to_string(options.engine)).c_str(),
                 std::string(engine::to_string(options.filter.algorithm)).c_str(),
                 std::string(engine::to_string(options.filter.association)).c_str(),
@@ -209,7 +224,7 @@ std::string csv_line(const ScalingOptions& options, const ScalingPoint& p) {
                 static_cast<long long>(p.live_bytes), static_cast<long long>(p.lower_bound_bytes),
                 p.pose_error, p.predict_seconds, p.associate_seconds, p.update_seconds,
                 p.resample_seconds, p.observe_wall_seconds, std::max<std::size_t>(1, p.run_seconds.size()),
-                slowest);
+                slowest, p.cpu_seconds);
   return buf;
 }
 
@@ -240,9 +255,9 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
               std::string(engine::to_string(f.association)).c_str(),
               static_cast<unsigned long long>(options.updates),
               static_cast<unsigned long long>(options.repeats));
-  std::printf("%10s %7s %3s %8s %12s %12s %10s %10s %10s %8s %8s\n", "landmarks", "M", "T",
-              "obs/upd", "us/update", "ns/part-upd", "ns/part-obs", "live MiB", "1 map MiB",
-              "live/map", "error m");
+  std::printf("%10s %7s %3s %8s %12s %12s %12s %10s %10s %10s %8s %8s\n", "landmarks", "M",
+              "T", "obs/upd", "us/update", "cpu us/upd", "ns/part-upd", "ns/part-obs",
+              "live MiB", "1 map MiB", "live/map", "error m");
   std::ofstream csv;
   if (!csv_path.empty()) {
     csv.open(csv_path);
@@ -257,10 +272,12 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
         run.filter.threads = t;
         const ScalingPoint p = run_repeated(run, n);
         const double mib = 1.0 / (1 << 20);
-        std::printf("%10llu %7u %3u %8.1f %12.1f %12.1f %10.1f %10.2f %10.2f %8.3f %8.2f\n",
+        std::printf("%10llu %7u %3u %8.1f %12.1f %12.1f %12.1f %10.1f %10.2f %10.2f %8.3f %8.2f\n",
                     static_cast<unsigned long long>(n), p.particles, p.threads,
                     static_cast<double>(p.observations) / static_cast<double>(p.updates),
-                    1e6 * p.seconds_per_update, 1e9 * p.seconds_per_update / p.particles,
+                    1e6 * p.seconds_per_update,
+                    1e6 * p.cpu_seconds / static_cast<double>(p.updates),
+                    1e9 * p.seconds_per_update / p.particles,
                     1e9 * per_particle_observation(p), static_cast<double>(p.live_bytes) * mib,
                     static_cast<double>(p.lower_bound_bytes) * mib,
                     static_cast<double>(p.live_bytes) / static_cast<double>(p.lower_bound_bytes),

@@ -59,6 +59,7 @@ struct ScalingPoint {
   std::uint64_t observations = 0;
   double seconds = 0.0;  // all updates, wall
   double seconds_per_update = 0.0;
+  double cpu_seconds = 0.0;  // CPU time of the process (all threads) over the same updates
   std::int64_t live_bytes = 0;
   std::int64_t lower_bound_bytes = 0;  // one map
   double pose_error = 0.0;  // m, weighted mean position against the truth after the last update
