@@ -13,9 +13,11 @@ is drawn (a file may vary several):
                          parallel efficiency against M
 
 One line per (file, M, threads) or (file, N, ...) group, labelled by the configuration (engine,
-algorithm, association). A figure with nothing to draw is not written.
+algorithm, association). A figure with nothing to draw is not written. `--clock cpu` draws the
+process CPU time of the one-thread figures (time in N and in M) instead of the wall time, the
+honest measure on a shared machine (points need `cpu_seconds`); speed-ups are always wall.
 
-Usage: tools/plot_scaling.py FILE.json [FILE.json ...] --out DIR
+Usage: tools/plot_scaling.py FILE.json [FILE.json ...] --out DIR [--clock wall|cpu]
 Needs Debian's python3-matplotlib (run with /usr/bin/python3). A file that is not a scaling
 JSON is refused, naming the file and what is missing.
 """
@@ -66,6 +68,14 @@ def label(config):
     )
 
 
+CLOCK = {"key": "seconds", "name": "wall"}
+
+
+def per_update(p):
+    """Seconds per update by the chosen clock."""
+    return p[CLOCK["key"]] / p["updates"] if CLOCK["key"] != "seconds" else p["seconds_per_update"]
+
+
 def varies(points, key):
     return len({p[key] for p in points}) > 1
 
@@ -98,12 +108,12 @@ def plot_in_n(runs, out):
         for (m, t), g in groups(points, ("particles", "threads")):
             name = f"{label(config)} M={m} t{t}"
             n = [p["landmarks"] for p in g]
-            ax_t.loglog(n, [1e3 * p["seconds_per_update"] for p in g], "o-", label=name)
+            ax_t.loglog(n, [1e3 * per_update(p) for p in g], "o-", label=name)
             line = ax_m.loglog(n, [p["live_bytes"] * MIB for p in g], "o-", label=name)[0]
             ax_m.loglog(n, [p["lower_bound_bytes"] * MIB for p in g], ":",
                         color=line.get_color())
     ax_t.set_xlabel("landmarks N")
-    ax_t.set_ylabel("milliseconds per sensor update")
+    ax_t.set_ylabel(f"milliseconds per sensor update ({CLOCK['name']})")
     ax_t.set_title("Time per update against map size (constant density)", fontsize=10)
     ax_m.set_xlabel("landmarks N")
     ax_m.set_ylabel("live MiB (all particles' maps)")
@@ -147,14 +157,15 @@ def plot_in_particles(runs, out):
         for (n, t), g in groups(points, ("landmarks", "threads")):
             name = f"{label(config)} N={n} t{t}"
             m = [p["particles"] for p in g]
-            axes[0].loglog(m, [1e3 * p["seconds_per_update"] for p in g], "o-", label=name)
-            axes[1].loglog(m, [1e6 * p["seconds_per_update"] / p["particles"] for p in g], "o-",
+            axes[0].loglog(m, [1e3 * per_update(p) for p in g], "o-", label=name)
+            axes[1].loglog(m, [1e6 * per_update(p) / p["particles"] for p in g], "o-",
                            label=name)
             line = axes[2].loglog(m, [p["live_bytes"] * MIB for p in g], "o-", label=name)[0]
             axes[2].loglog(m, [p["lower_bound_bytes"] * MIB for p in g], ":",
                            color=line.get_color())
     titles = ("Time per update", "Time per particle-update", "Memory; dotted: one map")
-    ylabels = ("milliseconds per sensor update", "microseconds per particle per update",
+    ylabels = (f"milliseconds per sensor update ({CLOCK['name']})",
+               f"microseconds per particle per update ({CLOCK['name']})",
                "live MiB")
     for ax, title, ylabel in zip(axes, titles, ylabels):
         ax.set_xlabel("particles M")
@@ -203,8 +214,15 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("files", nargs="+", help="JSON files of fastslam bench scaling --json")
     parser.add_argument("--out", required=True, help="directory to write the PNGs into")
+    parser.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                        help="time of the one-thread figures: wall or process CPU seconds")
     args = parser.parse_args()
     runs = [(path,) + load(path) for path in args.files]
+    if args.clock == "cpu":
+        CLOCK.update(key="cpu_seconds", name="CPU")
+        for path, _, points in runs:
+            if any("cpu_seconds" not in p for p in points):
+                sys.exit(f"plot_scaling: {path}: --clock cpu needs 'cpu_seconds' in every point")
     os.makedirs(args.out, exist_ok=True)
     plot_in_n(runs, args.out)
     plot_in_particles(runs, args.out)

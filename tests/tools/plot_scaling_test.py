@@ -23,7 +23,7 @@ SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "t
 def point(n, m, t, scale):
     seconds = scale * 1e-6 * m * (1 + n / 1e6) / t
     return {"landmarks": n, "particles": m, "threads": t, "updates": 100,
-            "seconds": 100 * seconds, "seconds_per_update": seconds,
+            "seconds": 100 * seconds, "seconds_per_update": seconds, "cpu_seconds": 90 * seconds,
             "live_bytes": int(scale * 100 * n + 1000 * m), "lower_bound_bytes": 64 * n,
             "seconds_per_phase": {"predict": 1e-4, "associate": 2e-3, "update": 1e-3,
                                   "resample": 5e-4}}
@@ -42,9 +42,9 @@ def write(tmp, name, data):
     return path
 
 
-def run(files, out):
-    return subprocess.run([sys.executable, SCRIPT, *files, "--out", out], capture_output=True,
-                          text=True)
+def run(files, out, *extra):
+    return subprocess.run([sys.executable, SCRIPT, *files, "--out", out, *extra],
+                          capture_output=True, text=True)
 
 
 def check_png(path):
@@ -59,7 +59,7 @@ def main():
         old = study("linear", [1000, 10000], [100], [1], 10.0)
         old["config"]["particles"], old["config"]["threads"] = 100, 1  # the old format
         for p in old["points"]:
-            del p["particles"], p["threads"], p["seconds_per_phase"]
+            del p["particles"], p["threads"], p["seconds_per_phase"], p["cpu_seconds"]
         linear = write(tmp, "linear.json", old)
         out = os.path.join(tmp, "n")
         r = run([tree, linear], out)
@@ -72,12 +72,16 @@ def main():
         particles = write(tmp, "m.json", study("tree", [10000], [1, 10, 100, 1000], [1], 1.0))
         threads = write(tmp, "t.json", study("tree", [10000], [100, 1000, 10000], [1, 2], 1.0))
         out = os.path.join(tmp, "mt")
-        r = run([particles, threads], out)
+        r = run([particles, threads], out, "--clock", "cpu")
         assert r.returncode == 0, r.stderr
         assert sorted(os.listdir(out)) == ["scaling_particles.png", "scaling_threads.png"], \
             os.listdir(out)
         for png in os.listdir(out):
             check_png(os.path.join(out, png))
+
+        r = run([tree, linear], os.path.join(tmp, "cpu"), "--clock", "cpu")  # linear: no cpu
+        assert r.returncode != 0 and "linear.json" in r.stderr and "cpu_seconds" in r.stderr, \
+            r.stderr
 
         bad = write(tmp, "bad.json", {"config": {}, "points": [{"landmarks": 1000}]})
         r = run([bad], out)
