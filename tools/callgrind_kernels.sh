@@ -70,7 +70,7 @@ import json, re, subprocess, sys
 cg, js = sys.argv[1], sys.argv[2]
 p = json.load(open(js))["points"][0]
 po = p["observations"] * p["particles"]
-text = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", cg],
+text = subprocess.run(["callgrind_annotate", "--auto=no", "--inclusive=yes", "--threshold=100", cg],
                       capture_output=True, text=True, check=True).stdout
 rows = []
 for line in text.splitlines():
@@ -101,29 +101,34 @@ for ir, pct, name in rows:
     seen.add(short)
     print(f"  {ir / po:9.0f}  {pct:5.1f}%  {short[:120]}")
 
-# Self (exclusive) Ir grouped by component: recursion cannot double count, and inlined code is
-# charged to the function it was inlined into.
+# Self (exclusive) Ir grouped by component, matched on "file:function" in this order (inlined
+# code is charged to the file it came from, so the math inlined into the filter counts as math).
 GROUPS = [
-    ("spatial index (candidate and footprint queries, moves)", r"BasicSpatialIndex"),
-    ("landmark tree (lookups, path copies, releases)", r"BasicLandmarkTree"),
-    ("node heap (allocate, free)", r"NodeHeap|PoolHeap|je_|jemalloc|malloc|free"),
-    ("libm (atan2, log, exp, sincos)", r"atan2|ieee754|__log|__exp|sincos|__sin|__cos|^log|^exp"),
-    ("EKF and association math", r"evaluate_observation|apply_update|associate_maximum|landmark_ekf"),
-    ("random normals (keyed streams)", r"normal|random|philox|Random"),
-    ("motion (control steps)", r"advance_block|motion|Motion"),
-    ("resampling", r"[Rr]esampl|draw_|ParticleStore"),
-    ("TBB dispatch", r"tbb::"),
-    ("filter loop (rest of Filter::Impl)", r"Filter"),
+    ("libm (atan2, log, sincos, remainder)", r"libm\.so|^\./math/|sysdeps"),
+    ("spatial index (candidate and footprint queries, moves)", r"spatial_index|BasicSpatialIndex"),
+    ("landmark tree (lookups, path copies, releases)", r"landmark_tree|BasicLandmarkTree"),
+    ("node heap (allocate, free, counters)",
+     r"node_heap|NodeHeap|PoolHeap|jemalloc|je_|pthread_getspecific"),
+    ("random normals (keyed Philox streams)", r"philox|random_stream|pair_run|normal_pairs"),
+    ("motion (control steps)", r"motion|sample_block|advance_block|vmath"),
+    ("EKF and association math",
+     r"landmark_ekf|measurement_model|association\.cc|evaluate_observation|apply_update|"
+     r"associate_maximum|Eigen|emmintrin"),
+    ("resampling", r"[Rr]esampl|particle_store|ParticleStore"),
+    ("TBB dispatch", r"tbb"),
+    ("filter loop (filter.cc)", r"filter\.cc|Filter::"),
+    ("C++ library (vectors, sorting)", r"/usr/include/c\+\+"),
 ]
-text = subprocess.run(["callgrind_annotate", "--threshold=100", cg], capture_output=True,
+text = subprocess.run(["callgrind_annotate", "--auto=no", "--threshold=100", cg], capture_output=True,
                       text=True, check=True).stdout
 sums = {g: 0 for g, _ in GROUPS}
 other = 0
-for line in text.splitlines():
-    m = re.match(r"\s*([\d,]+) \(\s*([\d.]+)%\)\s+([^\s:]*):(.*?) \[", line)
+body = text.split("file:function", 1)[1]
+for line in body.splitlines():
+    m = re.match(r"\s*([\d,]+) \(\s*([\d.]+)%\)\s+(.*)$", line)
     if not m:
         continue
-    ir, name = int(m.group(1).replace(",", "")), m.group(4)
+    ir, name = int(m.group(1).replace(",", "")), m.group(3)
     for g, pattern in GROUPS:
         if re.search(pattern, name):
             sums[g] += ir

@@ -10,8 +10,9 @@
 // density whatever N is); a filter whose particles all share the true map as a prior
 // (Filter::set_map: covariance 0.1 m^2 per axis, existence log-odds 50, ids = world indices so
 // known association works too). Timed: feeding the controls and scans (every particle phase
-// and the resampling). Memory: the heap's live bytes at the end, and a lower bound, the live
-// bytes of the one shared map right after set_map (every particle needs at least that).
+// and the resampling), not the estimate read afterwards (it copies a whole map, O(N)); wall
+// and process CPU seconds. Memory: the heap's live bytes at the end, and a lower bound, the
+// live bytes of the one shared map right after set_map (every particle needs at least that).
 //
 // Engines: `kTree` is the filter (engine/filter.h); `kLinear` the linear-copy baseline
 // (tools/linear_baseline.h: flat per-particle maps copied whole at resampling, FastSLAM 1.0 with

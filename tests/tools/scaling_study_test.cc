@@ -8,8 +8,8 @@
 #include <fstream>
 #include <stdexcept>
 #include <string>
-#include <vector>
 #include <unistd.h>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -114,8 +114,8 @@ TEST(ScalingStudy, ListsMakeOnePointPerCombinationInJsonAndCsv) {
   o.updates = 30;
   o.repeats = 2;
   const std::string base = (std::filesystem::temp_directory_path() /
-                             ("fastslam_scaling_lists_" + std::to_string(::getpid())))
-                                .string();
+                            ("fastslam_scaling_lists_" + std::to_string(::getpid())))
+                               .string();
   ASSERT_EQ(run_scaling_command(o, base + ".json", base + ".csv"), 0);
   std::ifstream in(base + ".json");
   const nlohmann::json j = nlohmann::json::parse(in);
@@ -129,9 +129,8 @@ TEST(ScalingStudy, ListsMakeOnePointPerCombinationInJsonAndCsv) {
         EXPECT_EQ(p["particles"], m);
         EXPECT_EQ(p["threads"], t);
         ASSERT_EQ(p["run_seconds"].size(), 2u);
-        EXPECT_DOUBLE_EQ(p["seconds"].get<double>(),
-                         std::min(p["run_seconds"][0].get<double>(),
-                                  p["run_seconds"][1].get<double>()));
+        EXPECT_DOUBLE_EQ(p["seconds"].get<double>(), std::min(p["run_seconds"][0].get<double>(),
+                                                              p["run_seconds"][1].get<double>()));
         if (t == 2) {  // same seed, 1 and 2 threads: the same estimate and memory
           const auto& one = j["points"][k - 2];
           EXPECT_EQ(p["pose_error_m"], one["pose_error_m"]);
