@@ -192,13 +192,14 @@ def plot_threads(runs, out):
                 top = max(top, t)
                 ms = sorted(m for m in by_m if base in by_m[m] and t in by_m[m])
                 speedup = [by_m[m][base] / by_m[m][t] for m in ms]
-                name = f"{label(config)} N={n}: {t} vs {base} threads"
+                grain = f", grain {config['grain']}" if "grain" in config else ""
+                name = f"{label(config)} N={n}{grain}: {t} vs {base} threads"
                 axes[0].semilogx(ms, speedup, "o-", label=name)
                 axes[1].semilogx(ms, [s * base / t for s in speedup], "o-", label=name)
     axes[0].axhline(top, color="gray", linestyle="--", linewidth=1, label="ideal")
     axes[0].axhline(1.8, color="red", linestyle=":", linewidth=1, label="target 1.8x (2 threads)")
     axes[1].axhline(1.0, color="gray", linestyle="--", linewidth=1, label="ideal")
-    axes[0].set_ylabel("speed-up (time at fewest threads / time)")
+    axes[0].set_ylabel("speed-up (wall time at fewest threads / wall time)")
     axes[1].set_ylabel("parallel efficiency (speed-up / thread ratio)")
     for ax in axes:
         ax.set_xlabel("particles M")
