@@ -182,7 +182,7 @@ def plot_threads(runs, out):
         return
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
     top = 1
-    for _, config, points in runs:
+    for path, config, points in runs:
         for (n,), g in groups(points, ("landmarks",)):
             base = min(p["threads"] for p in g)
             by_m = defaultdict(dict)
@@ -193,7 +193,7 @@ def plot_threads(runs, out):
                 ms = sorted(m for m in by_m if base in by_m[m] and t in by_m[m])
                 speedup = [by_m[m][base] / by_m[m][t] for m in ms]
                 grain = f", grain {config['grain']}" if "grain" in config else ""
-                name = f"{label(config)} N={n}{grain}: {t} vs {base} threads"
+                name = f"{os.path.basename(path)}: N={n}{grain}, {t} vs {base} threads"
                 axes[0].semilogx(ms, speedup, "o-", label=name)
                 axes[1].semilogx(ms, [s * base / t for s in speedup], "o-", label=name)
     axes[0].axhline(top, color="gray", linestyle="--", linewidth=1, label="ideal")
