@@ -63,6 +63,8 @@ function(fastslam_benchmark name)
   target_link_libraries(${name} PRIVATE ${ARG_DEPS} benchmark::benchmark benchmark::benchmark_main)
   fastslam_executable_setup(${name})
   add_test(NAME ${name}_smoke COMMAND ${name} --benchmark_min_time=0)
+  # A benchmark that calls SkipWithError still exits 0: fail on its message.
   set_tests_properties(${name}_smoke PROPERTIES LABELS "bench-smoke" TIMEOUT 600
+    FAIL_REGULAR_EXPRESSION "ERROR OCCURRED"
     ENVIRONMENT "FASTSLAM_BENCH_SMOKE=1")
 endfunction()

@@ -237,9 +237,11 @@ class BasicSpatialIndex {
   // Halves the root square (by 2^kLevelsPerNode) while every entry lies in the smaller one.
   void shrink_root() noexcept;
 
+  // `reach`: a radius at least the query's plus every rounding margin; only the children the
+  // square of half-side `reach` around (x, y) overlaps are tested.
   template <class Visit>
   static void within_node(const Node* node, const Cell& cell, double x, double y, double r2,
-                          double prune2, Visit& visit);
+                          double prune2, double reach, Visit& visit);
   template <class Visit>
   static void for_each_node(const Node* node, Visit& visit);
   struct Best;  // nearest(): the running k best, a max-heap on distance

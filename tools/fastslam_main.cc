@@ -60,12 +60,14 @@ int main(int argc, char** argv) {
   CLI::App* scaling_cmd = bench_cmd->add_subcommand(
       "scaling",
       "time per sensor update and live memory against map size N at constant density (maps "
-      "pre-grown to N, then --updates scans timed); prints a table, writes JSON");
+      "pre-grown to N, then --updates scans timed), for every N x M x threads of the lists; "
+      "prints a table, writes JSON and CSV");
   scaling_cmd->add_option("--landmarks", scaling.landmarks, "map sizes N, comma separated")
       ->delimiter(',')
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
       ->capture_default_str();
-  scaling_cmd->add_option("--particles", scaling.filter.particles, "particles (M)")
+  scaling_cmd->add_option("--particles", scaling.particles, "particle counts M, comma separated")
+      ->delimiter(',')
       ->check(CLI::Range(1U, 10'000'000U))
       ->capture_default_str();
   scaling_cmd->add_option("--updates", scaling.updates, "sensor updates (scans) timed per N")
@@ -88,11 +90,26 @@ int main(int argc, char** argv) {
   scaling_cmd->add_option("--association", scaling_association, "known or ml or das")
       ->check(CLI::IsMember({"known", "ml", "das"}))
       ->capture_default_str();
-  scaling_cmd->add_option("--threads", scaling.filter.threads, "worker threads (0: all cores)")
+  scaling_cmd
+      ->add_option("--threads", scaling.threads,
+                   "worker thread counts, comma separated (0: all cores)")
+      ->delimiter(',')
       ->check(CLI::Range(0U, 4096U))
+      ->capture_default_str();
+  scaling_cmd
+      ->add_option("--grain", scaling.filter.grain,
+                   "particles per parallel task; up to this many run on the calling thread")
+      ->check(CLI::Range(std::size_t{1}, std::size_t{1'000'000}))
+      ->capture_default_str();
+  scaling_cmd
+      ->add_option("--repeats", scaling.repeats,
+                   "runs per point; the fastest is reported, all are kept in the JSON")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1000}))
       ->capture_default_str();
   scaling_cmd->add_option("--seed", scaling.filter.seed, "random seed")->capture_default_str();
   scaling_cmd->add_option("--json", scaling_json, "write the points as JSON to this file");
+  std::string scaling_csv;
+  scaling_cmd->add_option("--csv", scaling_csv, "write the points as CSV to this file");
 
   // fastslam experiment lg-slam: the convergence experiment of section 7
   // (tools/lg_slam_experiment.h).
@@ -148,7 +165,7 @@ int main(int argc, char** argv) {
                                    : scaling_association == "das"
                                        ? Association::kDataAssociationSampling
                                        : Association::kMaximumLikelihood;
-      return fastslam::tools::run_scaling_command(scaling, scaling_json);
+      return fastslam::tools::run_scaling_command(scaling, scaling_json, scaling_csv);
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "fastslam: error: %s\n", e.what());

@@ -652,7 +652,7 @@ void BasicSpatialIndex<P>::for_each(Visit&& visit) const {
 template <class P>
 template <class Visit>
 void BasicSpatialIndex<P>::within_node(const Node* node, const Cell& cell, double x, double y,
-                                       double r2, double prune2, Visit& visit) {
+                                       double r2, double prune2, double reach, Visit& visit) {
   if (node->leaf()) {
     const SpatialEntry* e = entries(node);
     for (std::uint32_t i = 0; i < node->count; ++i) {
@@ -665,22 +665,43 @@ void BasicSpatialIndex<P>::within_node(const Node* node, const Cell& cell, doubl
     return;
   }
   const auto* inner = static_cast<const Inner*>(node);
-  for (unsigned i = 0; i < kWidth; ++i) {
-    const Node* child = inner->child[i];
-    if (child == nullptr) {
-      continue;
+  // Only the rows and columns of children that the square [x - reach, x + reach] x [y - reach,
+  // y + reach] overlaps (a small disc deep in the tree: one child of four, not four box tests).
+  // The margin is far above the rounding of these few operations; the exact tests below decide.
+  constexpr unsigned kSide = 1u << kLevelsPerNode;
+  const double inv_side = static_cast<double>(kSide) / cell.side;
+  const double margin = 0x1p-30 * (std::fabs(x - cell.x) + std::fabs(y - cell.y) + cell.side);
+  unsigned lo[2];
+  unsigned hi[2];
+  const double q[2] = {x - cell.x, y - cell.y};
+  for (int axis = 0; axis < 2; ++axis) {
+    const double a = (q[axis] - reach - margin) * inv_side;
+    const double b = (q[axis] + reach + margin) * inv_side;
+    if (!(b >= 0.0) || !(a < static_cast<double>(kSide))) {
+      return;  // the square misses this cell on this axis
     }
-    const Cell sub = child_cell(cell, i);
-    if (box_distance2(sub, x, y) > prune2) {
-      continue;
-    }
-    // A square wholly inside the disc (with a margin for rounding) needs no per-entry test.
-    const double fx = std::max(std::fabs(sub.x - x), std::fabs(sub.x + sub.side - x));
-    const double fy = std::max(std::fabs(sub.y - y), std::fabs(sub.y + sub.side - y));
-    if (fx * fx + fy * fy <= r2 * (1.0 - 0x1p-40)) {
-      for_each_node(child, visit);
-    } else {
-      within_node(child, sub, x, y, r2, prune2, visit);
+    lo[axis] = a <= 0.0 ? 0u : static_cast<unsigned>(a);
+    hi[axis] = b >= static_cast<double>(kSide - 1) ? kSide - 1 : static_cast<unsigned>(b);
+  }
+  for (unsigned iy = lo[1]; iy <= hi[1]; ++iy) {
+    for (unsigned ix = lo[0]; ix <= hi[0]; ++ix) {
+      const unsigned i = (iy << kLevelsPerNode) | ix;
+      const Node* child = inner->child[i];
+      if (child == nullptr) {
+        continue;
+      }
+      const Cell sub = child_cell(cell, i);
+      if (box_distance2(sub, x, y) > prune2) {
+        continue;
+      }
+      // A square wholly inside the disc (with a margin for rounding) needs no per-entry test.
+      const double fx = std::max(std::fabs(sub.x - x), std::fabs(sub.x + sub.side - x));
+      const double fy = std::max(std::fabs(sub.y - y), std::fabs(sub.y + sub.side - y));
+      if (fx * fx + fy * fy <= r2 * (1.0 - 0x1p-40)) {
+        for_each_node(child, visit);
+      } else {
+        within_node(child, sub, x, y, r2, prune2, reach, visit);
+      }
     }
   }
 }
@@ -696,7 +717,9 @@ void BasicSpatialIndex<P>::within(double x, double y, double radius, Visit&& vis
   if (box_distance2(root_cell_, x, y) > prune2) {
     return;
   }
-  within_node(root_, root_cell_, x, y, r2, prune2, visit);
+  // sqrt(prune2) rounds to within an ulp of the pruning radius; the relative 2^-30 covers it.
+  const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
+  within_node(root_, root_cell_, x, y, r2, prune2, reach, visit);
 }
 
 template <class P>

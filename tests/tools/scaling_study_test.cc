@@ -3,11 +3,13 @@
 // carries the keys `fastslam bench scaling` promises; bad options are refused.
 #include "tools/scaling_study.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
 #include <string>
 #include <unistd.h>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -24,8 +26,8 @@ TEST(ScalingStudy, PointsShareOneMapAndTheJsonHasTheContractedKeys) {
     ScalingOptions o;
     o.landmarks = {1'000, 4'000};
     o.updates = 120;
-    o.filter.particles = 20;
-    o.filter.threads = 2;
+    o.particles = {20};
+    o.threads = {2};
     o.filter.association = association;
     const std::string json = (std::filesystem::temp_directory_path() /
                               ("fastslam_scaling_" + std::to_string(::getpid()) + ".json"))
@@ -45,6 +47,10 @@ TEST(ScalingStudy, PointsShareOneMapAndTheJsonHasTheContractedKeys) {
       EXPECT_LT(live, 3.0 * one_map) << "20 particles must share one map, not hold 20";
       EXPECT_TRUE(p.contains("seconds_per_phase"));
       EXPECT_TRUE(p.contains("pose_error_m"));
+      EXPECT_EQ(p["particles"], 20);
+      EXPECT_EQ(p["threads"], 2);
+      EXPECT_DOUBLE_EQ(p["seconds_per_particle_update"].get<double>(),
+                       p["seconds_per_update"].get<double>() / 20);
     }
     EXPECT_EQ(j["points"][1]["landmarks"], 4000);
     EXPECT_EQ(j["config"]["association"], engine::to_string(association));
@@ -96,6 +102,57 @@ TEST(ScalingStudy, LinearBaselineRefusesLargeMapsAndUnsupportedConfigs) {
   EXPECT_THROW(run_scaling_point(o, 100), std::invalid_argument);
 }
 
+// One command runs every (N, M, threads) of the lists, N outermost, threads innermost, each
+// point `repeats` times reporting the fastest; the CSV has the header and one line per point;
+// the results do not depend on the thread count (the same seed gives the same estimate).
+TEST(ScalingStudy, ListsMakeOnePointPerCombinationInJsonAndCsv) {
+  ScalingOptions o;
+  o.landmarks = {500, 2'000};
+  o.particles = {1, 16};
+  o.threads = {1, 2};
+  o.filter.grain = 8;  // let 16 particles split over two threads
+  o.updates = 30;
+  o.repeats = 2;
+  const std::string base = (std::filesystem::temp_directory_path() /
+                            ("fastslam_scaling_lists_" + std::to_string(::getpid())))
+                               .string();
+  ASSERT_EQ(run_scaling_command(o, base + ".json", base + ".csv"), 0);
+  std::ifstream in(base + ".json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  ASSERT_EQ(j["points"].size(), 8u);
+  std::size_t k = 0;
+  for (const std::uint64_t n : o.landmarks) {
+    for (const unsigned m : o.particles) {
+      for (const unsigned t : o.threads) {
+        const auto& p = j["points"][k++];
+        EXPECT_EQ(p["landmarks"], n);
+        EXPECT_EQ(p["particles"], m);
+        EXPECT_EQ(p["threads"], t);
+        ASSERT_EQ(p["run_seconds"].size(), 2u);
+        EXPECT_DOUBLE_EQ(p["seconds"].get<double>(), std::min(p["run_seconds"][0].get<double>(),
+                                                              p["run_seconds"][1].get<double>()));
+        if (t == 2) {  // same seed, 1 and 2 threads: the same estimate and memory
+          const auto& one = j["points"][k - 2];
+          EXPECT_EQ(p["pose_error_m"], one["pose_error_m"]);
+          EXPECT_EQ(p["live_bytes"], one["live_bytes"]);
+        }
+      }
+    }
+  }
+  EXPECT_EQ(j["config"]["particles"], nlohmann::json({1, 16}));
+  EXPECT_EQ(j["config"]["grain"], 8);
+  std::ifstream csv(base + ".csv");
+  std::string line;
+  std::vector<std::string> lines;
+  while (std::getline(csv, line)) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 9u);
+  EXPECT_EQ(lines[0].rfind("engine,algorithm,association,landmarks,particles,threads,", 0), 0u)
+      << lines[0];
+  EXPECT_EQ(lines[8].rfind("tree,fastslam1,known,2000,16,2,30,", 0), 0u) << lines[8];
+  std::filesystem::remove(base + ".json");
+  std::filesystem::remove(base + ".csv");
+}
+
 TEST(ScalingStudy, RefusesBadOptions) {
   ScalingOptions o;
   o.updates = 0;
@@ -104,6 +161,20 @@ TEST(ScalingStudy, RefusesBadOptions) {
   EXPECT_THROW(run_scaling_point(o, 0), std::invalid_argument);
   o.filter.particles = 0;
   EXPECT_THROW(run_scaling_point(o, 1000), std::invalid_argument);
+  ScalingOptions lists;
+  lists.landmarks = {100};
+  lists.updates = 5;
+  lists.particles = {};
+  EXPECT_THROW(run_scaling_command(lists, ""), std::invalid_argument);
+  lists.particles = {10, 0};  // refused before the first point runs
+  EXPECT_THROW(run_scaling_command(lists, ""), std::invalid_argument);
+  lists.particles = {10};
+  lists.repeats = 0;
+  EXPECT_THROW(run_scaling_command(lists, ""), std::invalid_argument);
+  lists.repeats = 1;
+  lists.engine = ScalingEngine::kLinear;
+  lists.threads = {1, 2};  // the baseline has one thread
+  EXPECT_THROW(run_scaling_command(lists, ""), std::invalid_argument);
 }
 
 }  // namespace
