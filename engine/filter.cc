@@ -208,13 +208,7 @@ struct Filter::Impl {
                                           static_cast<std::uint32_t>(begin), count, N, draws);
         }
         if (config.association == Association::kKnown) {
-          if (fs2) {
-            for (std::size_t i = begin; i < end; ++i) {
-              propose_particle<Motion>(i, load(i), *scan,
-                                       &draws[static_cast<std::size_t>(N) * (i - begin)],
-                                       log_weight, save, cov_of);
-            }
-          }
+          if (fs2) propose_block_known<N>(begin, end, *scan, draws.data());
           update_block_known(begin, end, *scan, scan_step, fs2 ? nullptr : log_weight);
         } else {
           // Unknown association, per particle: choose (and, for 2.0, draw the pose), then
@@ -376,30 +370,56 @@ struct Filter::Impl {
     }
   }
 
-  // FastSLAM 2.0, known association, one particle: folds the scan's observations of known
-  // landmarks into the proposal (eq. 61), adds their log-likelihoods to the weight, draws the
-  // pose from it (`draw` = the particle's N standard normals) and restarts the covariance.
-  template <class Motion, class Save, class CovOf>
-  void propose_particle(std::size_t i, typename Motion::State s,
-                        const std::vector<PlannedObservation>& scan, const double* draw,
-                        double* log_weight, const Save& save, const CovOf& cov_of) {
-    constexpr int N = Motion::kStateDim;
-    const memory::LandmarkTree& map = store.map(i);
-    double log_w = 0.0;
-    PoseGaussian<N> proposal;
-    proposal.mean = s;
-    proposal.cov = cov_of(i);
+  // FastSLAM 2.0, known association, particles [begin, end): the scan's observations of known
+  // landmarks folded into each particle's proposal in scan order (eq. 61), in lanes across the
+  // particles (engine/landmark_batch.h), their log-likelihoods added to the weights; then each
+  // pose drawn from its proposal (`draws`: N standard normals per particle) and the motion
+  // covariance restarted.
+  template <int N>
+  void propose_block_known(std::size_t begin, std::size_t end,
+                           const std::vector<PlannedObservation>& scan, const double* draws) {
+    constexpr int E = N * (N + 1) / 2;
+    const std::size_t count = end - begin;
+    // Columns: N means, E covariance entries, landmark x, y, sxx, sxy, syy, the log-likelihood.
+    thread_local std::vector<double> buffer;
+    buffer.assign((N + E + 6) * count, 0.0);
+    auto column = [&](int c) { return buffer.data() + static_cast<std::size_t>(c) * count; };
+    double* const state[5] = {store.x().data() + begin, store.y().data() + begin,
+                              store.theta().data() + begin, store.v().data() + begin,
+                              store.omega().data() + begin};
+    ProposalLanes<N> proposal;
+    for (int k = 0; k < N; ++k) {
+      proposal.mean[k] = column(k);
+      std::copy_n(state[k], count, proposal.mean[k]);
+    }
+    for (int row = 0, e = 0; row < N; ++row) {
+      for (int c = row; c < N; ++c, ++e) {
+        proposal.cov[e] = column(N + e);
+        for (std::size_t l = 0; l < count; ++l) {
+          proposal.cov[e][l] = pose_cov[(begin + l) * 25 + c * N + row];
+        }
+      }
+    }
+    double* lm[5];
+    for (int k = 0; k < 5; ++k) lm[k] = column(N + E + k);
+    double* const log_w = column(N + E + 5);
     for (const PlannedObservation& o : scan) {
       if (o.is_new) continue;
-      const LandmarkGaussian lm = to_gaussian(map.at(o.slot));
-      const ProposalObservation<N> terms = evaluate_proposal<N>(sensor, lm, proposal, o.z, r);
-      log_w += terms.log_likelihood;
-      proposal = fold<N>(proposal, terms);
+      for (std::size_t l = 0; l < count; ++l) {
+        const memory::Landmark& stored = store.map(begin + l).at(o.slot);
+        lm[0][l] = stored.x;
+        lm[1][l] = stored.y;
+        lm[2][l] = stored.sxx;
+        lm[3][l] = stored.sxy;
+        lm[4][l] = stored.syy;
+      }
+      fold_proposal_lanes<N>(sensor, r, o.z, proposal, {lm[0], lm[1], lm[2], lm[3], lm[4]}, log_w,
+                             count);
     }
-    s = sample_pose<N>(proposal, draw);
-    cov_of(i).setZero();
-    save(i, s);
-    log_weight[i] += log_w;
+    sample_pose_lanes<N>(proposal, draws, state, count);
+    std::fill_n(&pose_cov[begin * 25], count * 25, 0.0);
+    double* const log_weight = store.log_weight().data();
+    for (std::size_t l = 0; l < count; ++l) log_weight[begin + l] += log_w[l];
   }
 
   // Known association, the scan of particles [begin, end) at their (for 2.0: drawn) poses, one
