@@ -62,9 +62,16 @@ namespace fastslam::parallel::internal {
   constexpr std::uint64_t kOff = 0x3FE6A09E667F3BCDu;  // bits of sqrt(2) / 2
   const auto bits = std::bit_cast<std::uint64_t>(x);
   const std::uint64_t tmp = bits - kOff;
-  const std::int64_t k = static_cast<std::int64_t>(tmp) >> 52;  // arithmetic shift (C++20)
   const double m = std::bit_cast<double>(bits - (tmp & 0xFFF0000000000000u));
-  const auto dk = static_cast<double>(k);
+  // k = the top 12 bits of tmp as a signed number, and dk = k exactly, with logical shifts and
+  // integer adds only: AVX2 has neither a 64-bit arithmetic shift nor an int64 -> double
+  // conversion, and without them GCC does not vectorise a loop that calls this. The sign
+  // extension is (u ^ 2^11) - 2^11; adding k to the bits of 1.5 * 2^52 adds it to the integer
+  // that double holds (|k| < 2^11), so the subtraction gives k exactly.
+  constexpr std::uint64_t kMagicBits = 0x4338000000000000u;  // bits of 0x1.8p52
+  const std::uint64_t u = tmp >> 52;
+  const std::uint64_t k = (u ^ 0x800u) - 0x800u;  // two's complement of the signed 12-bit k
+  const double dk = std::bit_cast<double>(kMagicBits + k) - 0x1.8p52;
   const double f = m - 1.0;  // exact (Sterbenz)
   const double s = f / (2.0 + f);
   const double z = s * s;
