@@ -20,6 +20,7 @@
 #include <oneapi/tbb/combinable.h>
 
 #include "engine/association.h"
+#include "engine/landmark_batch.h"
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
 #include "engine/motion_batch.h"
@@ -207,12 +208,8 @@ struct Filter::Impl {
                                           static_cast<std::uint32_t>(begin), count, N, draws);
         }
         if (config.association == Association::kKnown) {
-          for (std::size_t i = begin; i < end; ++i) {
-            update_particle<Motion>(
-                i, load(i), *scan, scan_step,
-                fs2 ? &draws[static_cast<std::size_t>(N) * (i - begin)] : nullptr, log_weight, save,
-                cov_of);
-          }
+          if (fs2) propose_block_known<N>(begin, end, *scan, draws.data());
+          update_block_known(begin, end, *scan, scan_step, fs2 ? nullptr : log_weight);
         } else {
           // Unknown association, per particle: choose (and, for 2.0, draw the pose), then
           // change the map; one clock read between the phases times both.
@@ -373,55 +370,128 @@ struct Filter::Impl {
     }
   }
 
-  // The scan of one particle: FastSLAM 1.0 updates each observed landmark at the particle's
-  // pose; 2.0 (`draw` = the particle's N standard normals, null for 1.0) folds the observations
-  // into the proposal, draws the pose, then updates.
-  template <class Motion, class Save, class CovOf>
-  void update_particle(std::size_t i, typename Motion::State s,
-                       const std::vector<PlannedObservation>& scan, std::uint64_t scan_step,
-                       const double* draw, double* log_weight, const Save& save,
-                       const CovOf& cov_of) {
-    constexpr int N = Motion::kStateDim;
-    const bool fs2 = draw != nullptr;
-    memory::LandmarkTree& map = store.map(i);
-    double log_w = 0.0;
-    if (fs2) {
-      PoseGaussian<N> proposal;
-      proposal.mean = s;
-      proposal.cov = cov_of(i);
-      for (const PlannedObservation& o : scan) {
-        if (o.is_new) continue;
-        const LandmarkGaussian lm = to_gaussian(map.at(o.slot));
-        const ProposalObservation<N> terms = evaluate_proposal<N>(sensor, lm, proposal, o.z, r);
-        log_w += terms.log_likelihood;
-        proposal = fold<N>(proposal, terms);
-      }
-      s = sample_pose<N>(proposal, draw);
-      cov_of(i).setZero();
-      save(i, s);
+  // FastSLAM 2.0, known association, particles [begin, end): the scan's observations of known
+  // landmarks folded into each particle's proposal in scan order (eq. 61), in lanes across the
+  // particles (engine/landmark_batch.h), their log-likelihoods added to the weights; then each
+  // pose drawn from its proposal (`draws`: N standard normals per particle) and the motion
+  // covariance restarted.
+  template <int N>
+  void propose_block_known(std::size_t begin, std::size_t end,
+                           const std::vector<PlannedObservation>& scan, const double* draws) {
+    constexpr int E = N * (N + 1) / 2;
+    const std::size_t count = end - begin;
+    // Columns: N means, E covariance entries, landmark x, y, sxx, sxy, syy, the log-likelihood.
+    thread_local std::vector<double> buffer;
+    buffer.assign((N + E + 6) * count, 0.0);
+    auto column = [&](int c) { return buffer.data() + static_cast<std::size_t>(c) * count; };
+    double* const state[5] = {store.x().data() + begin, store.y().data() + begin,
+                              store.theta().data() + begin, store.v().data() + begin,
+                              store.omega().data() + begin};
+    ProposalLanes<N> proposal;
+    for (int k = 0; k < N; ++k) {
+      proposal.mean[k] = column(k);
+      std::copy_n(state[k], count, proposal.mean[k]);
     }
-    const Pose pose = s.template head<3>();
+    for (int row = 0, e = 0; row < N; ++row) {
+      for (int c = row; c < N; ++c, ++e) {
+        proposal.cov[e] = column(N + e);
+        for (std::size_t l = 0; l < count; ++l) {
+          proposal.cov[e][l] = pose_cov[(begin + l) * 25 + c * N + row];
+        }
+      }
+    }
+    double* lm[5];
+    for (int k = 0; k < 5; ++k) lm[k] = column(N + E + k);
+    double* const log_w = column(N + E + 5);
+    for (const PlannedObservation& o : scan) {
+      if (o.is_new) continue;
+      for (std::size_t l = 0; l < count; ++l) {
+        const memory::Landmark& stored = store.map(begin + l).at(o.slot);
+        lm[0][l] = stored.x;
+        lm[1][l] = stored.y;
+        lm[2][l] = stored.sxx;
+        lm[3][l] = stored.sxy;
+        lm[4][l] = stored.syy;
+      }
+      fold_proposal_lanes<N>(sensor, r, o.z, proposal, {lm[0], lm[1], lm[2], lm[3], lm[4]}, log_w,
+                             count);
+    }
+    sample_pose_lanes<N>(proposal, draws, state, count);
+    std::fill_n(&pose_cov[begin * 25], count * 25, 0.0);
+    double* const log_weight = store.log_weight().data();
+    for (std::size_t l = 0; l < count; ++l) log_weight[begin + l] += log_w[l];
+  }
+
+  // Known association, the scan of particles [begin, end) at their (for 2.0: drawn) poses, one
+  // observation at a time in scan order: a new landmark is initialised in every particle's map
+  // (eq. 69-70); a known one is gathered from every particle's map into lanes, updated by the
+  // vectorised EKF (engine/landmark_batch.h) and scattered back. Each particle sees its
+  // observations in scan order, as a per-particle loop would. `log_weight` (FastSLAM 1.0; null
+  // for 2.0, whose weight came from the proposal) gains each particle's sum of eq. 31 terms.
+  // The landmark references stay valid across the particles: an edit makes the particle's
+  // path its own, and later edits of other maps only copy shared nodes, never write them.
+  void update_block_known(std::size_t begin, std::size_t end,
+                          const std::vector<PlannedObservation>& scan, std::uint64_t scan_step,
+                          double* log_weight) {
+    const std::size_t count = end - begin;
+    const std::size_t lanes = padded_lanes(count);
+    // Columns: pose x, y, theta; landmark x, y, sxx, sxy, syy; the scan's log-likelihood sum.
+    thread_local std::vector<double> buffer;
+    thread_local std::vector<memory::Landmark*> edited;
+    buffer.resize(9 * lanes);
+    edited.resize(count);
+    double* col[9];
+    for (int c = 0; c < 9; ++c) col[c] = buffer.data() + c * lanes;
+    const double* const pose_col[3] = {store.x().data(), store.y().data(), store.theta().data()};
+    for (int c = 0; c < 3; ++c) {
+      std::copy_n(pose_col[c] + begin, count, col[c]);
+      std::fill(col[c] + count, col[c] + lanes, 0.0);
+    }
+    // Padding lanes: a landmark 1 m ahead with a unit covariance (any valid input; unused).
+    constexpr double kPadding[5] = {1.0, 0.0, 1.0, 0.0, 1.0};
+    for (int c = 0; c < 5; ++c) std::fill(col[3 + c] + count, col[3 + c] + lanes, kPadding[c]);
+    std::fill_n(col[8], lanes, 0.0);
+    const PoseLanes poses{col[0], col[1], col[2]};
+    const LandmarkLanes lm{col[3], col[4], col[5], col[6], col[7]};
+    const auto step_now = static_cast<std::int64_t>(scan_step);
     for (const PlannedObservation& o : scan) {
       if (o.is_new) {
-        const LandmarkGaussian lm = initialize_landmark(sensor, pose, o.z, r);
-        memory::Landmark stored;
-        store_gaussian(lm, stored);
-        stored.log_odds = config.existence.initial;
-        stored.id = o.id;
-        stored.last_seen = static_cast<std::int64_t>(scan_step);
-        map.insert(stored);
+        for (std::size_t l = 0; l < count; ++l) {
+          const Pose pose(col[0][l], col[1][l], col[2][l]);
+          memory::Landmark stored;
+          store_gaussian(initialize_landmark(sensor, pose, o.z, r), stored);
+          stored.log_odds = config.existence.initial;
+          stored.id = o.id;
+          stored.last_seen = step_now;
+          store.map(begin + l).insert(stored);
+        }
         continue;
       }
-      memory::Landmark& stored = map.edit(o.slot);
-      LandmarkGaussian lm = to_gaussian(stored);
-      const LandmarkObservation terms = evaluate_observation(sensor, lm, pose, o.z, r);
-      if (!fs2) log_w += terms.log_likelihood;
-      apply_update(lm, terms, r);
-      store_gaussian(lm, stored);
-      stored.log_odds += config.existence.seen;
-      stored.last_seen = static_cast<std::int64_t>(scan_step);
+      for (std::size_t l = 0; l < count; ++l) {
+        memory::Landmark& stored = store.map(begin + l).edit(o.slot);
+        edited[l] = &stored;
+        lm.x[l] = stored.x;
+        lm.y[l] = stored.y;
+        lm.sxx[l] = stored.sxx;
+        lm.sxy[l] = stored.sxy;
+        lm.syy[l] = stored.syy;
+      }
+      update_landmark_lanes(sensor, r, o.z, poses, lm, log_weight != nullptr ? col[8] : nullptr,
+                            lanes);
+      for (std::size_t l = 0; l < count; ++l) {
+        memory::Landmark& stored = *edited[l];
+        stored.x = lm.x[l];
+        stored.y = lm.y[l];
+        stored.sxx = lm.sxx[l];
+        stored.sxy = lm.sxy[l];
+        stored.syy = lm.syy[l];
+        stored.log_odds += config.existence.seen;
+        stored.last_seen = step_now;
+      }
     }
-    log_weight[i] += log_w;
+    if (log_weight != nullptr) {
+      for (std::size_t l = 0; l < count; ++l) log_weight[begin + l] += col[8][l];
+    }
   }
 
   // Unknown association, first sweep: the candidates of every observation from the spatial

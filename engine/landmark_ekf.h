@@ -1,5 +1,6 @@
 // The per-landmark EKF of FastSLAM 1.0 (paper eq. 25, 31, 32; section 4, table 1), the function
-// the filter calls per particle per observation, and the landmark initialisation (eq. 69-70).
+// the filter calls per particle per observation under unknown association (known association
+// runs its lane form, engine/landmark_batch.h), and the landmark initialisation (eq. 69-70).
 //
 // Two steps, so that unknown data association can score candidates before choosing one:
 //   evaluate_observation(model, lm, s, z, R)  -> LandmarkObservation: z_hat, v = z - z_hat

@@ -30,9 +30,14 @@ namespace {
 // arena; under ThreadSanitizer on plain std::threads (as many as the caller's arena has),
 // because Debian's libtbb is not instrumented and TSan would report TBB's own task hand-offs
 // as races in our code (google/sanitizers#1004; parallel/internal/thread_fork_join.h).
-// `body` must not throw.
+// `body` must not throw. A single block runs inline: a resampling of a small filter then costs
+// no parallel_for setup (twice per resampling).
 template <class Body>
 void for_blocks(std::size_t m, std::size_t grain, const Body& body) {
+  if (m <= grain) {
+    if (m > 0) body(0, m);
+    return;
+  }
 #if defined(FASTSLAM_MEMORY_TSAN)
   const std::size_t blocks = (m + grain - 1) / grain;
   const std::size_t threads =

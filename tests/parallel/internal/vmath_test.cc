@@ -1,4 +1,4 @@
-// Tests of parallel/internal/vmath.h: accuracy of log, sin and cos against long-double
+// Tests of parallel/internal/vmath.h: accuracy of log, sin, cos and atan2 against long-double
 // libm over wide ranges (including large angles and arguments next to multiples of pi/2), and
 // bit equality of the vectorised and the scalar forms (a loop the compiler vectorises against
 // calls through a function it cannot inline).
@@ -9,7 +9,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <iostream>
 #include <limits>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -147,19 +149,72 @@ TEST(VmathLog, WithinOneUlpOverManyBinades) {
   EXPECT_EQ(log_positive(1.0), 0.0);
 }
 
+// Error of arctan2(y, x) in ulps of the long-double reference (the ulp of the rounded result).
+double atan2_ulps(double y, double x) {
+  const long double ref = std::atan2(static_cast<long double>(y), static_cast<long double>(x));
+  const double rounded = std::fabs(static_cast<double>(ref));
+  const double ulp = std::nextafter(rounded, 1e300) - rounded;
+  return static_cast<double>(std::fabs(arctan2(y, x) - ref)) / ulp;
+}
+
+// Every octant and both signs of each argument, ratios from 2^-60 to 2^60 (the three
+// reduction intervals and the breakpoints between them), and points on the breakpoints.
+TEST(VmathAtan2, WithinTwoUlpsOverTheFullRange) {
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::uniform_real_distribution<double> exponent(-30.0, 30.0);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < kDraws; ++i) {
+    const double y = unit(rng) * std::exp2(exponent(rng));
+    const double x = unit(rng) * std::exp2(exponent(rng));
+    worst = std::max(worst, atan2_ulps(y, x));
+    worst = std::max(worst, atan2_ulps(unit(rng), unit(rng)));
+  }
+  for (const double ratio : {0.66, 2.41421356237309504880, 1.0, 0.4142135623730950488}) {
+    for (const double sy : {1.0, -1.0}) {
+      for (const double sx : {1.0, -1.0}) {
+        for (const double t : {ratio, std::nextafter(ratio, 0.0), std::nextafter(ratio, 9.0)}) {
+          worst = std::max(worst, atan2_ulps(sy * t, sx));
+          worst = std::max(worst, atan2_ulps(sy * 3.7, sx * 3.7 / t));
+        }
+      }
+    }
+  }
+  EXPECT_LE(worst, 2.0);
+  std::cout << "arctan2: worst " << worst << " ulp\n";
+}
+
+// Axes, signed zeros and the quadrant boundaries as std::atan2 gives them (finite arguments).
+TEST(VmathAtan2, AxesSignedZerosAndWrapAgreeWithStd) {
+  const double values[] = {0.0, -0.0, 1.0, -1.0, 1e-300, -1e-300, 5e-324, 1e300, -1e300, 3.5};
+  for (const double y : values) {
+    for (const double x : values) {
+      const double want = std::atan2(y, x);
+      const double got = arctan2(y, x);
+      EXPECT_EQ(std::signbit(got), std::signbit(want)) << y << ", " << x;
+      EXPECT_NEAR(got, want, 2.0 * kUlp1 * std::max(1.0, std::fabs(want))) << y << ", " << x;
+    }
+  }
+  EXPECT_EQ(arctan2(0.0, -1.0), std::atan2(0.0, -1.0));  // +pi, never beyond
+  EXPECT_EQ(arctan2(-0.0, -1.0), std::atan2(-0.0, -1.0));
+  EXPECT_LE(arctan2(1e-300, -1.0), std::numbers::pi);
+  EXPECT_GE(arctan2(-1e-300, -1.0), -std::numbers::pi);
+}
+
 // The scalar forms, through a function the compiler may not inline into a vectorised loop.
-[[gnu::noinline]] void scalar_all(double x, double out[4]) {
+[[gnu::noinline]] void scalar_all(double x, double out[5]) {
   sincos(x, out[0], out[1]);
   out[2] = log_positive(std::fabs(x) + 1e-3);
   double c = 0.0;
   double s = 0.0;
   sincos_turns(std::fabs(std::floor(x * 1e9)), c, s);
   out[3] = c + s;
+  out[4] = arctan2(x, x * 0.37 - 900.0);
 }
 
 TEST(Vmath, VectorisedLoopsGiveTheScalarBits) {
   const std::vector<double> xs = uniform_draws(-3000.0, 3000.0, 13);
-  std::vector<double> c(xs.size()), s(xs.size()), lg(xs.size()), tr(xs.size());
+  std::vector<double> c(xs.size()), s(xs.size()), lg(xs.size()), tr(xs.size()), at(xs.size());
   for (std::size_t i = 0; i < xs.size(); ++i) {  // vectorised at -O3
     sincos(xs[i], c[i], s[i]);
     lg[i] = log_positive(std::fabs(xs[i]) + 1e-3);
@@ -167,11 +222,12 @@ TEST(Vmath, VectorisedLoopsGiveTheScalarBits) {
     double ts = 0.0;
     sincos_turns(std::fabs(std::floor(xs[i] * 1e9)), tc, ts);
     tr[i] = tc + ts;
+    at[i] = arctan2(xs[i], xs[i] * 0.37 - 900.0);
   }
   for (std::size_t i = 0; i < xs.size(); ++i) {
-    double ref[4];
+    double ref[5];
     scalar_all(xs[i], ref);
-    const double got[4] = {c[i], s[i], lg[i], tr[i]};
+    const double got[5] = {c[i], s[i], lg[i], tr[i], at[i]};
     ASSERT_EQ(std::memcmp(got, ref, sizeof(got)), 0) << "x = " << xs[i];
   }
 }

@@ -1,0 +1,107 @@
+// The per-observation math of a scan applied to many particles at once, over structure-of-arrays
+// lanes, so that the compiler vectorises across particles. With known data association every
+// particle of a block observes the same landmark slot at once: the filter gathers that landmark
+// of each particle into lanes, calls the kernel, and scatters the result back (the tree edits
+// stay scalar). Two kernels:
+//   update_landmark_lanes   the landmark EKF of engine/landmark_ekf.h (evaluate_observation +
+//                           apply_update, eq. 25, 31, 32) and the FastSLAM 1.0 weight term;
+//   fold_proposal_lanes     FastSLAM 2.0: one observation folded into each lane's pose proposal
+//                           (engine/proposal.h: evaluate_proposal + fold, eq. 42-49, 60-61) and
+//                           its weight term; sample_pose_lanes then draws each lane's pose
+//                           (proposal.h's sample_pose).
+//
+// Each lane equals the scalar functions up to rounding: atan2 and log are
+// parallel/internal/vmath.h's (below 2 ulp and 1 ulp) instead of libm's, the sensor's sine and
+// cosine (with an offset) too, and the bearing is wrapped in two exact steps;
+// tests/engine/landmark_batch_test.cc bounds the difference. A lane whose inputs leave the vector
+// path's domain (landmark at the sensor, a non-positive innovation determinant, a heading beyond a
+// few turns, non-finite values) is recomputed by the scalar functions (engine/landmark_ekf.h,
+// engine/proposal.h).
+//
+// Determinism: a lane's result depends on that lane's inputs alone, not on `lanes` or the
+// lane's position: the file is compiled without floating-point contraction (every product is
+// rounded, fma only where vmath.h's madd says so), and whether a lane falls back depends on its
+// inputs alone. So the filter stays bit-identical for any thread count and grain.
+//
+// Layout: every column holds `lanes` doubles; lane l is entry l of each. Columns must not
+// overlap. Thread safety: pure functions of their arguments; concurrent calls on disjoint columns
+// are safe. Costs: O(lanes); update_landmark_lanes about 120 flops, five divisions and a square
+// root per lane, fold_proposal_lanes O(N^3) more for the N x N proposal; no allocation.
+#pragma once
+
+#include <cstddef>
+
+#include <Eigen/Core>
+
+#include "engine/measurement_model.h"
+
+namespace fastslam::engine {
+
+// Landmark means and covariances (upper triangle), read and written.
+struct LandmarkLanes {
+  double* x = nullptr;
+  double* y = nullptr;
+  double* sxx = nullptr;
+  double* sxy = nullptr;
+  double* syy = nullptr;
+};
+
+// Vehicle poses (heading in (-pi, pi]), read only.
+struct PoseLanes {
+  const double* x = nullptr;
+  const double* y = nullptr;
+  const double* theta = nullptr;
+};
+
+// For every lane l < lanes: the observation z = (range, bearing in (-pi, pi]) of landmark l
+// from pose l under `sensor` with noise `r` (symmetric positive definite): adds ln N(v; 0, Q)
+// (eq. 31) to log_w[l] unless log_w is null, then updates landmark l (eq. 25, Joseph form) as
+// apply_update does.
+void update_landmark_lanes(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
+                           const Eigen::Vector2d& z, PoseLanes pose, LandmarkLanes lm,
+                           double* log_w, std::size_t lanes);
+
+// Pose proposals N(mean, cov) of state dimension N (heading = component 2, in (-pi, pi]):
+// N mean columns and the N (N + 1) / 2 columns of the covariance's upper triangle, row by row
+// ((0,0), (0,1), ..., (0,N-1), (1,1), ...), read and written.
+template <int N>
+struct ProposalLanes {
+  double* mean[N] = {};
+  double* cov[N * (N + 1) / 2] = {};
+};
+
+// Landmark means and covariances (upper triangle), read only.
+struct ConstLandmarkLanes {
+  const double* x = nullptr;
+  const double* y = nullptr;
+  const double* sxx = nullptr;
+  const double* sxy = nullptr;
+  const double* syy = nullptr;
+};
+
+// For every lane l < lanes: observation z of landmark l evaluated against proposal l
+// (evaluate_proposal: linearised at the proposal's mean), its ln N(v; 0, L) added to log_w[l],
+// and the proposal replaced by the folded one (fold). N = 3 or 5.
+template <int N>
+void fold_proposal_lanes(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
+                         const Eigen::Vector2d& z, ProposalLanes<N> proposal, ConstLandmarkLanes lm,
+                         double* log_w, std::size_t lanes);
+
+// For every lane l < lanes: state[k][l] = sample_pose(proposal l, &normals[N * l])[k], the
+// heading wrapped. N = 3 or 5.
+template <int N>
+void sample_pose_lanes(ProposalLanes<N> proposal, const double* normals, double* const* state,
+                       std::size_t lanes);
+
+extern template void fold_proposal_lanes<3>(const RangeBearingModel&, const Eigen::Matrix2d&,
+                                            const Eigen::Vector2d&, ProposalLanes<3>,
+                                            ConstLandmarkLanes, double*, std::size_t);
+extern template void fold_proposal_lanes<5>(const RangeBearingModel&, const Eigen::Matrix2d&,
+                                            const Eigen::Vector2d&, ProposalLanes<5>,
+                                            ConstLandmarkLanes, double*, std::size_t);
+extern template void sample_pose_lanes<3>(ProposalLanes<3>, const double*, double* const*,
+                                          std::size_t);
+extern template void sample_pose_lanes<5>(ProposalLanes<5>, const double*, double* const*,
+                                          std::size_t);
+
+}  // namespace fastslam::engine
