@@ -175,6 +175,11 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
       ->capture_default_str();
   cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
+  o.plot_script = default_plot_script();
+  cmd.add_flag_callback(
+      "--no-plot", [&o] { o.plot_script.clear(); },
+      "with --out: no map.png (drawn by tools/plot_run.py with matplotlib, or "
+      "$FASTSLAM_PLOT_SCRIPT)");
   add_config_option(cmd, w);
 }
 

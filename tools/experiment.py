@@ -108,7 +108,7 @@ class Runner:
 
     def one_run(self, index, args, trace_every):
         out = os.path.join(self.scratch, f"run{index}")
-        cmd = ["run", *args, "--threads", "1", "--no-progress", "--out", out]
+        cmd = ["run", *args, "--threads", "1", "--no-progress", "--no-plot", "--out", out]
         trace_path = out + ".trace.csv"
         if trace_every:
             cmd += ["--trace", trace_path, "--trace-every", str(trace_every)]

@@ -2,17 +2,22 @@
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <numbers>
 #include <optional>
 #include <span>
+#include <spawn.h>
 #include <stdexcept>
 #include <sys/resource.h>
+#include <sys/wait.h>
 #include <unordered_map>
 #include <vector>
 
@@ -424,7 +429,37 @@ class TraceWriter {
   std::uint64_t scans_ = 0;
 };
 
+// Runs the plot script on the output directory; the run's results stand whatever it does, so a
+// failure is a warning naming the command and its exit status.
+void draw_map(const std::string& script, const std::string& out) {
+  std::fflush(stdout);
+  const std::string python = "/usr/bin/python3";
+  std::vector<std::string> args = {python, script, out};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  int status = 0;
+  const int spawned = posix_spawn(&pid, python.c_str(), nullptr, nullptr, argv.data(), environ);
+  if (spawned != 0) {
+    std::fprintf(stderr, "warning: map.png not drawn: cannot start %s: %s\n", python.c_str(),
+                 std::strerror(spawned));
+    return;
+  }
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    std::fprintf(stderr, "warning: map.png not drawn: '%s %s %s' failed (status %d)\n",
+                 python.c_str(), script.c_str(), out.c_str(), status);
+  }
+}
+
 }  // namespace
+
+std::string default_plot_script() {
+  if (const char* env = std::getenv("FASTSLAM_PLOT_SCRIPT"); env != nullptr) return env;
+  return FASTSLAM_PLOT_RUN_SCRIPT;
+}
 
 int run_simulation(const RunOptions& options) {
   Source source = open_source(options);
@@ -711,6 +746,7 @@ int run_simulation(const RunOptions& options) {
     written += ",true_landmarks.csv";
   }
   std::printf("  wrote %s/{%s}\n", options.out.c_str(), written.c_str());
+  if (!options.plot_script.empty()) draw_map(options.plot_script, options.out);
   return 0;
 }
 

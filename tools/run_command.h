@@ -97,7 +97,15 @@ struct RunOptions {
   std::string trace;
   std::uint64_t trace_every = 1;
   bool progress = true;  // a progress bar on stderr when it is a terminal
+  // With `out`: the matplotlib script run as `/usr/bin/python3 SCRIPT OUT` after the files are
+  // written, to draw OUT/map.png (the command line sets tools/plot_run.py unless --no-plot).
+  // Empty: no picture. A failing script is reported on stderr and does not fail the run.
+  std::string plot_script;
 };
+
+// The plot script `fastslam run` uses by default: $FASTSLAM_PLOT_SCRIPT when set, else this
+// source tree's tools/plot_run.py.
+std::string default_plot_script();
 
 // Runs any source (the name is historical) and returns the process exit code; throws
 // std::exception with a clear message on bad options or unreadable files.

@@ -164,6 +164,15 @@ TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
   EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
 }
 
+// `fastslam run --out` draws map.png unless --no-plot (tools/run_command.h).
+TEST_F(CommandLine, PlotScriptUnlessNoPlot) {
+  RunOptions o = run("{}", "");
+  EXPECT_EQ(o.plot_script, default_plot_script());
+  EXPECT_NE(o.plot_script.find("plot_run.py"), std::string::npos);
+  EXPECT_TRUE(run("{}", "--no-plot").plot_script.empty());
+  EXPECT_TRUE(run(R"({"no-plot": true})", "").plot_script.empty());
+}
+
 TEST_F(CommandLine, MotionNoneAndTheStartHeading) {
   RunOptions o = run("{}", "");
   EXPECT_EQ(o.motion, "odometry");

@@ -30,7 +30,7 @@ nlohmann::json run(const std::string& args, const std::string& name) {
   RunOptions o;
   RunWords w;
   add_run_options(app, o, w);
-  app.parse(args + " --no-progress --out " + out, false);
+  app.parse(args + " --no-progress --no-plot --out " + out, false);
   finish_run_options(app, w, o);
   EXPECT_EQ(run_simulation(o), 0);
   std::ifstream in(out + "/metrics.json");
