@@ -2,9 +2,9 @@
 // as the command line parses it (the source's defaults included), FastSLAM 1.0, M = 100, ML
 // association, one seed. A run is a deterministic function of the seed (and the same for any
 // thread count), so the bounds below are the measured values with a margin, not statistics:
-// docs/victoria-park.md has the numbers over seeds 1-5. FastSLAM 2.0 with one particle too.
-// About 6 s in release; labelled
-// "end-to-end", which the sanitizer presets leave out.
+// docs/victoria-park.md has the numbers over seeds 1-5. FastSLAM 2.0 with one particle and
+// FastSLAM 1.0 without odometry too. About 17 s CPU in release (10 s of it without odometry);
+// labelled "end-to-end", which the sanitizer presets leave out.
 #include <filesystem>
 #include <fstream>
 #include <string>
