@@ -314,14 +314,17 @@ TEST(MotionBatchTest, LanesOutsideTheVectorDomainUseTheScalarModel) {
   huge_steer.steps[0].u1 = 3e6;  // every lane's steering is beyond the domain
   Fixture<BaileyCarModel> mixed = f;
   mixed.normals[mixed.lanes + 5] = 2e8;  // lane 5's perturbed steering 1e7 rad
+  mixed.normals[mixed.lanes + 7] = 16.0;  // lane 7's 0.9 rad: beyond sincos_small's domain
   const Fixture<BaileyCarModel> before = mixed;
   sample_block(bailey, mixed.block(), mixed.steps, sigmas, mixed.normals.data());
   sample_block(bailey, f.block(), f.steps, sigmas, f.normals.data());
-  const double n5[2] = {before.normal(0, 0, 5), before.normal(0, 1, 5)};
-  const Eigen::Vector3d want5 = bailey.sample(before.state(5), {3.0, 0.1}, 0.1, sigmas, n5);
-  for (int k = 0; k < 3; ++k) EXPECT_EQ(mixed.state(5)[k], want5[k]) << k;
+  for (const std::size_t lane : {std::size_t{5}, std::size_t{7}}) {
+    const double n[2] = {before.normal(0, 0, lane), before.normal(0, 1, lane)};
+    const Eigen::Vector3d want = bailey.sample(before.state(lane), {3.0, 0.1}, 0.1, sigmas, n);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(mixed.state(lane)[k], want[k]) << lane << " " << k;
+  }
   for (std::size_t i = 0; i < 16; ++i) {
-    if (i == 5) continue;
+    if (i == 5 || i == 7) continue;
     for (int k = 0; k < 3; ++k) EXPECT_EQ(mixed.state(i)[k], f.state(i)[k]) << i;
   }
   const Fixture<BaileyCarModel> huge_before = huge_steer;
