@@ -98,6 +98,12 @@ using parallel::internal::sincos_in_domain;
   return r;
 }
 
+// Whether sincos_small(u1) is sincos(u1): steering angles are well inside it (the car's limit
+// is far below pi/4); a lane beyond it takes the scalar path.
+[[gnu::always_inline]] inline bool steer_in_small_domain(double u1) noexcept {
+  return std::fabs(u1) <= parallel::internal::kSinCosSmallArg;
+}
+
 // The Jacobian dh/ds of a model is the identity plus the entries listed in kJacobianPattern
 // (row, column); `terms` computes their values and V = dh/du at (s, u), and `move` applies the
 // motion h(u, s) to one lane in place, returning false when the lane needs the scalar path.
@@ -115,8 +121,8 @@ struct Lane<BaileyCarModel> {
     const double heading = u1 + s[2];
     double c, sn, cg, sg;
     parallel::internal::sincos(heading, c, sn);
-    parallel::internal::sincos(u1, cg, sg);
-    bool ok = sincos_in_domain(heading) & sincos_in_domain(u1);
+    parallel::internal::sincos_small(u1, cg, sg);  // a steering angle: no range reduction
+    bool ok = sincos_in_domain(heading) & steer_in_small_domain(u1);
     s[0] = madd(vdt, c, s[0]);
     s[1] = madd(vdt, sn, s[1]);
     s[2] = wrap_near(madd(vdt * sg, 1.0 / m.wheelbase(), s[2]), ok);  // hoisted reciprocal
@@ -129,7 +135,7 @@ struct Lane<BaileyCarModel> {
     const double vdt = u0 * dt;
     double c, sn, cg, sg;
     parallel::internal::sincos(u1 + s[2], c, sn);
-    parallel::internal::sincos(u1, cg, sg);
+    parallel::internal::sincos_small(u1, cg, sg);  // lanes beyond its domain: move() is false
     j[0] = -(vdt * sn);
     j[1] = vdt * c;
     v[0][0] = dt * c;

@@ -250,23 +250,28 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
     std::size_t k = 0;
     if constexpr (internal::kPhiloxSimdLanes > 0) {
       // Whole chunks: the words by the explicit SIMD rounds, then the transform over the chunk
-      // (vectorised by the compiler); the same values as the fused loop below.
-      constexpr std::size_t kChunk = 16;
-      for (; k + kChunk <= n; k += kChunk) {
+      // (vectorised by the compiler); the same values as the fused loop below. Chunks of 16,
+      // then of 8 (a filter block of 104 lanes: six and one), so that only a remainder below 8
+      // takes the scalar loop, at about four times the cost per lane.
+      auto chunk = [&]<std::size_t kChunk>(std::size_t at) __attribute__((always_inline)) {
         alignas(64) std::uint64_t w0[kChunk];
         alignas(64) std::uint64_t w1[kChunk];
         alignas(64) std::uint64_t w2[kChunk];
         alignas(64) std::uint64_t w3[kChunk];
         for (std::size_t l = 0; l < kChunk; ++l) {
           w0[l] = 0;
-          w1[l] = (first_particle + k + l) & 0xFFFFFFFFu;
+          w1[l] = (first_particle + at + l) & 0xFFFFFFFFu;
           w2[l] = c2;
           w3[l] = c3;
         }
         internal::philox4x32_10_simd<kChunk>(keys, w0, w1, w2, w3);
         for (std::size_t l = 0; l < kChunk; ++l) {
-          box_muller(w0[l] | w1[l] << 32, w2[l] | w3[l] << 32, out0[k + l], out1[k + l]);
+          box_muller(w0[l] | w1[l] << 32, w2[l] | w3[l] << 32, out0[at + l], out1[at + l]);
         }
+      };
+      for (; k + 16 <= n; k += 16) chunk.template operator()<16>(k);
+      if constexpr (8 % internal::kPhiloxSimdStep == 0) {
+        for (; k + 8 <= n; k += 8) chunk.template operator()<8>(k);
       }
     }
     for (; k < n; ++k) {

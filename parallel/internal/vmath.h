@@ -22,6 +22,8 @@
 //                     arguments next to multiples of pi/2. Beyond 2^20 the results are finite
 //                     but meaningless: callers test `sincos_in_domain` and take a scalar libm
 //                     path for such arguments (engine/motion_batch.h does).
+//   sincos_small(x)   |x| <= kSinCosSmallArg: the bits of sincos(x) [tested], without the
+//                     range reduction.
 //   arctan2(y, x)     finite y and x (zeros, signed as std::atan2, and subnormals included):
 //                     below 1.6 ulp of the result (measured) [2 ulp].
 // Thread safety: pure functions. Costs: O(1), no allocation, no branches a vectoriser cannot
@@ -208,6 +210,17 @@ inline constexpr std::array<double, 6> kCosMinimax = {
   r = madd(-n, kPio2_2, r);
   r = madd(-n, kPio2_3, r);
   vmath_detail::sincos_quadrant_minimax(r, quadrant, cos_out, sin_out);
+}
+
+// The domain of `sincos_small`: |x| <= kSinCosSmallArg (< pi/4, so round(x 2/pi) = 0).
+inline constexpr double kSinCosSmallArg = 0.78125;
+
+// cos(x) and sin(x) for |x| <= kSinCosSmallArg (callers test the bound): the bits of sincos(x),
+// whose reduction is the identity there (n = 0, r = x, quadrant 0), without its cost. For
+// small angles such as a steering angle.
+[[gnu::always_inline]] inline void sincos_small(double x, double& cos_out,
+                                                double& sin_out) noexcept {
+  vmath_detail::sincos_quadrant_minimax(x, 0, cos_out, sin_out);
 }
 
 // c ? a : b on the bits: GCC 12 if-converts this where it may branch on a conditional

@@ -99,6 +99,27 @@ TEST(VmathSinCos, AccurateNextToMultiplesOfHalfPi) {
   EXPECT_LE(e.cos, kSinCosBound);
 }
 
+// sincos_small is sincos without the reduction: the same bits over its whole domain, which the
+// accuracy tests above cover (uniform draws, tiny and signed-zero arguments, the bounds).
+TEST(VmathSinCos, SmallGivesTheBitsOfSincos) {
+  std::vector<double> xs = uniform_draws(-kSinCosSmallArg, kSinCosSmallArg, 13);
+  for (const double x : {0.0, -0.0, 1e-300, -1e-300, 1e-8, 0.5, kSinCosSmallArg,
+                         -kSinCosSmallArg, std::nextafter(kSinCosSmallArg, 0.0)}) {
+    xs.push_back(x);
+  }
+  std::size_t differing = 0;
+  for (const double x : xs) {
+    double c = 0.0, s = 0.0, c_small = 0.0, s_small = 0.0;
+    sincos(x, c, s);
+    sincos_small(x, c_small, s_small);
+    if (std::memcmp(&c, &c_small, sizeof c) != 0 || std::memcmp(&s, &s_small, sizeof s) != 0) {
+      ++differing;
+    }
+  }
+  EXPECT_EQ(differing, 0u) << "of " << xs.size();
+  EXPECT_LT(kSinCosSmallArg, std::numbers::pi / 4);
+}
+
 TEST(VmathSinCos, ExactValuesAndSigns) {
   double c = 0.0;
   double s = 0.0;
