@@ -286,8 +286,8 @@ void BasicSpatialIndex<P>::grow_to(double x, double y) {
           if (old->child[i] == nullptr) {
             continue;
           }
-          const unsigned q = ((i >> kLevelsPerNode) >= kHalf ? 2u : 0u) |
-                             ((i & (kSide - 1)) >= kHalf ? 1u : 0u);
+          const unsigned q =
+              ((i >> kLevelsPerNode) >= kHalf ? 2u : 0u) | ((i & (kSide - 1)) >= kHalf ? 1u : 0u);
           if (quadrant[q] == nullptr) {
             quadrant[q] = make_inner();
           }
@@ -582,32 +582,40 @@ void BasicSpatialIndex<P>::erase(Slot slot, double x, double y) {
 }
 
 template <class P>
-void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x,
-                                double to_y) {
+void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x, double to_y) {
   check_point(to_x, to_y, "move");
-  Cell leaf_cell;
-  if (!locate(slot, from_x, from_y, &leaf_cell)) {
+  if (root_ == nullptr || !contains(root_cell_, from_x, from_y)) {
     internal::throw_no_entry("move", slot, from_x, from_y);
   }
-  if (contains(leaf_cell, to_x, to_y)) {
-    // Same leaf: own the path once and change the entry in place.
-    Node** link = &root_;
-    Cell cell = root_cell_;
-    for (;;) {
-      *link = own(*link);
-      if ((*link)->leaf()) {
-        break;
-      }
-      Cell child;
-      link = &static_cast<Inner*>(*link)->child[child_of(cell, from_x, from_y, child)];
-      cell = child;
+  // One descent, owning the path to the leaf that holds `from` (the path any change of this
+  // entry owns: an in-place move, or the erase after an insert). Owning replaces a node by an
+  // equal copy, so on bad_alloc or when there is no such entry the entries are unchanged.
+  Node** link = &root_;
+  Cell cell = root_cell_;
+  for (;;) {
+    *link = own(*link);
+    if ((*link)->leaf()) {
+      break;
     }
-    SpatialEntry* e = entries(*link);
-    std::uint32_t i = 0;
-    while (!(e[i].slot == slot && e[i].x == from_x && e[i].y == from_y)) {
-      ++i;
+    Cell child;
+    Node** next = &static_cast<Inner*>(*link)->child[child_of(cell, from_x, from_y, child)];
+    if (*next == nullptr) {
+      internal::throw_no_entry("move", slot, from_x, from_y);
     }
-    e[i].x = to_x;
+    link = next;
+    cell = child;
+  }
+  SpatialEntry* e = entries(*link);
+  const std::uint32_t count = (*link)->count;
+  std::uint32_t i = 0;
+  while (i < count && !(e[i].slot == slot && e[i].x == from_x && e[i].y == from_y)) {
+    ++i;
+  }
+  if (i == count) {
+    internal::throw_no_entry("move", slot, from_x, from_y);
+  }
+  if (contains(cell, to_x, to_y)) {
+    e[i].x = to_x;  // same leaf: in place
     e[i].y = to_y;
     return;
   }
@@ -723,6 +731,65 @@ void BasicSpatialIndex<P>::within(double x, double y, double radius, Visit&& vis
 }
 
 template <class P>
+auto BasicSpatialIndex<P>::covering(double min_x, double min_y, double max_x,
+                                    double max_y) const noexcept -> Subtree {
+  Subtree out;
+  if (root_ == nullptr || !contains(root_cell_, min_x, min_y) ||
+      !contains(root_cell_, max_x, max_y)) {
+    return out;
+  }
+  const Node* node = root_;
+  Cell cell = root_cell_;
+  while (!node->leaf()) {
+    Cell low;
+    Cell high;
+    const unsigned i = child_of(cell, min_x, min_y, low);
+    if (i != child_of(cell, max_x, max_y, high)) {
+      break;  // the box straddles this node's children
+    }
+    const Node* child = static_cast<const Inner*>(node)->child[i];
+    if (child == nullptr) {
+      break;
+    }
+    node = child;
+    cell = low;
+  }
+  out.node_ = node;
+  out.x_ = cell.x;
+  out.y_ = cell.y;
+  out.side_ = cell.side;
+  out.level_ = cell.level;
+  return out;
+}
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::within(const Subtree& from, double x, double y, double radius,
+                                  Visit&& visit) const {
+  if (root_ == nullptr) {
+    return;
+  }
+  if (from.node_ != nullptr) {
+    const double r2 = radius * radius;
+    const double prune2 = r2 + r2 * 0x1p-40;
+    const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
+    // Every entry the disc holds lies within `reach` of (x, y) on each axis; the margin covers
+    // the rounding of these sums. Then no entry outside the square can be a hit, and the
+    // descent below the node visits the same children in the same order as one from the root
+    // (no ancestor's square lies wholly inside the disc: each holds the square of half-side
+    // reach around (x, y)).
+    const double margin = 0x1p-30 * (std::fabs(x) + std::fabs(y) + reach);
+    if (x - reach - margin >= from.x_ && x + reach + margin < from.x_ + from.side_ &&
+        y - reach - margin >= from.y_ && y + reach + margin < from.y_ + from.side_) {
+      const Cell cell{from.x_, from.y_, from.side_, from.level_};
+      within_node(static_cast<const Node*>(from.node_), cell, x, y, r2, prune2, reach, visit);
+      return;
+    }
+  }
+  within(x, y, radius, visit);
+}
+
+template <class P>
 template <class Visit>
 void BasicSpatialIndex<P>::in_footprint(double x, double y, double heading, double max_range,
                                         double field_of_view, Visit&& visit) const {
@@ -754,9 +821,7 @@ struct BasicSpatialIndex<P>::Best {
     const double dy = e.y - y;
     return dx * dx + dy * dy;
   }
-  bool less(const SpatialEntry& a, const SpatialEntry& b) const noexcept {
-    return d2(a) < d2(b);
-  }
+  bool less(const SpatialEntry& a, const SpatialEntry& b) const noexcept { return d2(a) < d2(b); }
 };
 
 template <class P>
