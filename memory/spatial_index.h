@@ -231,16 +231,19 @@ class BasicSpatialIndex {
   static std::size_t leaf_bytes(std::uint32_t capacity) noexcept {
     return sizeof(Node) + std::size_t{capacity} * sizeof(SpatialEntry);
   }
-  static bool contains(const Cell& cell, double x, double y) noexcept {
+  [[gnu::always_inline]] static bool contains(const Cell& cell, double x, double y) noexcept {
     return x >= cell.x && x < cell.x + cell.side && y >= cell.y && y < cell.y + cell.side;
   }
   // The child of `cell` holding (x, y), and its index; exact comparisons against boundaries.
-  static unsigned child_of(const Cell& cell, double x, double y, Cell& child) noexcept;
-  static Cell child_cell(const Cell& cell, unsigned index) noexcept;
+  // (Inlined: a call per level was most of a descent's cost.)
+  [[gnu::always_inline]] static inline unsigned child_of(const Cell& cell, double x, double y,
+                                                         Cell& child) noexcept;
+  [[gnu::always_inline]] static inline Cell child_cell(const Cell& cell, unsigned index) noexcept;
   // Whether a leaf of `cell` may split (children at least kMinLevel, boundaries exact).
   static bool can_split(const Cell& cell) noexcept;
   // Squared distance from (x, y) to the square, never more than to any point inside it.
-  static double box_distance2(const Cell& cell, double x, double y) noexcept;
+  [[gnu::always_inline]] static inline double box_distance2(const Cell& cell, double x,
+                                                            double y) noexcept;
   static void check_point(double x, double y, const char* operation);
 
   Node* make_leaf(std::uint32_t capacity);

@@ -78,7 +78,7 @@ void BasicSpatialIndex<P>::clear() noexcept {
 // point" is decided by exact comparisons and is the same on every path that asks it.
 
 template <class P>
-unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
+inline unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
                                         Cell& child) noexcept {
   double cx = cell.x;
   double cy = cell.y;
@@ -103,7 +103,7 @@ unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
 }
 
 template <class P>
-auto BasicSpatialIndex<P>::child_cell(const Cell& cell, unsigned index) noexcept -> Cell {
+inline auto BasicSpatialIndex<P>::child_cell(const Cell& cell, unsigned index) noexcept -> Cell {
   const double side = cell.side * (1.0 / static_cast<double>(1u << kLevelsPerNode));
   const unsigned ix = index & ((1u << kLevelsPerNode) - 1);
   const unsigned iy = index >> kLevelsPerNode;
@@ -121,7 +121,7 @@ bool BasicSpatialIndex<P>::can_split(const Cell& cell) noexcept {
 }
 
 template <class P>
-double BasicSpatialIndex<P>::box_distance2(const Cell& cell, double x, double y) noexcept {
+inline double BasicSpatialIndex<P>::box_distance2(const Cell& cell, double x, double y) noexcept {
   // Rounding is monotone, so each term is at most the same term for any point in the square.
   double dx = 0.0;
   double dy = 0.0;
