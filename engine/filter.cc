@@ -79,6 +79,7 @@ struct AssociationScratch {
   std::vector<memory::Slot> taken;
   std::vector<memory::Slot> touched;
   std::vector<memory::SpatialEntry> in_view;
+  std::vector<std::array<double, 3>> discs;  // observation j's candidate disc: x, y, radius
 };
 
 // The particle blocks of a pass over m particles: whole groups of kMotionLanes particles (the
@@ -523,6 +524,12 @@ struct Filter::Impl {
     const Eigen::Vector2d from = sensor.sensor_position(pose);
     scratch.candidates.clear();
     scratch.terms.clear();
+    // The scan's discs first, then one descent to the node whose square holds all of them; each
+    // disc query starts there (the same entries in the same order as from the root).
+    scratch.discs.resize(scan.size());
+    double box[4] = {
+        std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+        -std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
     for (std::size_t j = 0; j < scan.size(); ++j) {
       const Eigen::Vector2d& z = scan[j].z;
       const Eigen::Vector2d at = sensor.landmark_from(z, pose);
@@ -532,7 +539,23 @@ struct Filter::Impl {
         spread += 2.0 * (prior.cov(0, 0) + prior.cov(1, 1)) + 2.0 * lever * lever * prior.cov(2, 2);
       }
       const double radius = std::sqrt(scale2 * gate * spread);
-      index.within(at[0], at[1], radius, [&](const memory::SpatialEntry& e) {
+      scratch.discs[j] = {at[0], at[1], radius};
+      box[0] = std::min(box[0], at[0] - radius);
+      box[1] = std::min(box[1], at[1] - radius);
+      box[2] = std::max(box[2], at[0] + radius);
+      box[3] = std::max(box[3], at[1] + radius);
+    }
+    // A margin of 1/64 of the box's extent, so that rounding near the edges rarely sends a
+    // query back to the root (within() checks the containment exactly either way).
+    const double pad = 0.015625 * (box[2] - box[0] + box[3] - box[1]);
+    const memory::SpatialIndex::Subtree near =
+        scan.empty() || !std::isfinite(pad)
+            ? memory::SpatialIndex::Subtree()
+            : index.covering(box[0] - pad, box[1] - pad, box[2] + pad, box[3] + pad);
+    for (std::size_t j = 0; j < scan.size(); ++j) {
+      const Eigen::Vector2d& z = scan[j].z;
+      const auto [at_x, at_y, radius] = scratch.discs[j];
+      index.within(near, at_x, at_y, radius, [&](const memory::SpatialEntry& e) {
         if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
         const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
         const auto obs = static_cast<std::uint32_t>(j);

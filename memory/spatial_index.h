@@ -139,6 +139,36 @@ class BasicSpatialIndex {
   template <class Visit>
   void within(double x, double y, double radius, Visit&& visit) const;
 
+  // A node of this index with its square, to start disc queries from (see `covering`). It
+  // borrows the node: valid until this index is next changed, copied over or destroyed.
+  class Subtree {
+   public:
+    Subtree() = default;
+    bool empty() const noexcept { return node_ == nullptr; }
+    // Side of the node's square in metres (0 when empty).
+    double side() const noexcept { return side_; }
+
+   private:
+    friend class BasicSpatialIndex;
+    const void* node_ = nullptr;
+    double x_ = 0.0;  // the square: corner (x_, y_), side side_ = 2^level_
+    double y_ = 0.0;
+    double side_ = 0.0;
+    int level_ = 0;
+  };
+
+  // The deepest node whose square holds the box [min_x, max_x] x [min_y, max_y] (one descent
+  // from the root); empty when the index is empty or the box is not inside the root's square.
+  // A scan's candidate discs all lie near the sensor, so one descent per scan replaces one per
+  // disc query. REQUIRES: arguments finite, min <= max.
+  Subtree covering(double min_x, double min_y, double max_x, double max_y) const noexcept;
+
+  // As within(x, y, radius, visit), with the same entries in the same order, but descending
+  // from `from` (a result of covering() on this unchanged index) when the disc, with its
+  // rounding margin, lies inside its square; otherwise from the root.
+  template <class Visit>
+  void within(const Subtree& from, double x, double y, double radius, Visit&& visit) const;
+
   // visit(const SpatialEntry&) for every entry inside the sensor footprint of a sensor at
   // (x, y) facing `heading` (radians): within `max_range`, and with a bearing off the heading
   // by at most field_of_view / 2: |remainder(atan2(ey - y, ex - x) - heading, 2 pi)| <=
@@ -201,16 +231,19 @@ class BasicSpatialIndex {
   static std::size_t leaf_bytes(std::uint32_t capacity) noexcept {
     return sizeof(Node) + std::size_t{capacity} * sizeof(SpatialEntry);
   }
-  static bool contains(const Cell& cell, double x, double y) noexcept {
+  [[gnu::always_inline]] static bool contains(const Cell& cell, double x, double y) noexcept {
     return x >= cell.x && x < cell.x + cell.side && y >= cell.y && y < cell.y + cell.side;
   }
   // The child of `cell` holding (x, y), and its index; exact comparisons against boundaries.
-  static unsigned child_of(const Cell& cell, double x, double y, Cell& child) noexcept;
-  static Cell child_cell(const Cell& cell, unsigned index) noexcept;
+  // (Inlined: a call per level was most of a descent's cost.)
+  [[gnu::always_inline]] static inline unsigned child_of(const Cell& cell, double x, double y,
+                                                         Cell& child) noexcept;
+  [[gnu::always_inline]] static inline Cell child_cell(const Cell& cell, unsigned index) noexcept;
   // Whether a leaf of `cell` may split (children at least kMinLevel, boundaries exact).
   static bool can_split(const Cell& cell) noexcept;
   // Squared distance from (x, y) to the square, never more than to any point inside it.
-  static double box_distance2(const Cell& cell, double x, double y) noexcept;
+  [[gnu::always_inline]] static inline double box_distance2(const Cell& cell, double x,
+                                                            double y) noexcept;
   static void check_point(double x, double y, const char* operation);
 
   Node* make_leaf(std::uint32_t capacity);

@@ -78,7 +78,7 @@ void BasicSpatialIndex<P>::clear() noexcept {
 // point" is decided by exact comparisons and is the same on every path that asks it.
 
 template <class P>
-unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
+inline unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
                                         Cell& child) noexcept {
   double cx = cell.x;
   double cy = cell.y;
@@ -103,7 +103,7 @@ unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
 }
 
 template <class P>
-auto BasicSpatialIndex<P>::child_cell(const Cell& cell, unsigned index) noexcept -> Cell {
+inline auto BasicSpatialIndex<P>::child_cell(const Cell& cell, unsigned index) noexcept -> Cell {
   const double side = cell.side * (1.0 / static_cast<double>(1u << kLevelsPerNode));
   const unsigned ix = index & ((1u << kLevelsPerNode) - 1);
   const unsigned iy = index >> kLevelsPerNode;
@@ -121,7 +121,7 @@ bool BasicSpatialIndex<P>::can_split(const Cell& cell) noexcept {
 }
 
 template <class P>
-double BasicSpatialIndex<P>::box_distance2(const Cell& cell, double x, double y) noexcept {
+inline double BasicSpatialIndex<P>::box_distance2(const Cell& cell, double x, double y) noexcept {
   // Rounding is monotone, so each term is at most the same term for any point in the square.
   double dx = 0.0;
   double dy = 0.0;
@@ -585,29 +585,38 @@ template <class P>
 void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x,
                                 double to_y) {
   check_point(to_x, to_y, "move");
-  Cell leaf_cell;
-  if (!locate(slot, from_x, from_y, &leaf_cell)) {
+  if (root_ == nullptr || !contains(root_cell_, from_x, from_y)) {
     internal::throw_no_entry("move", slot, from_x, from_y);
   }
-  if (contains(leaf_cell, to_x, to_y)) {
-    // Same leaf: own the path once and change the entry in place.
-    Node** link = &root_;
-    Cell cell = root_cell_;
-    for (;;) {
-      *link = own(*link);
-      if ((*link)->leaf()) {
-        break;
-      }
-      Cell child;
-      link = &static_cast<Inner*>(*link)->child[child_of(cell, from_x, from_y, child)];
-      cell = child;
+  // One descent, owning the path to the leaf that holds `from` (the path any change of this
+  // entry owns: an in-place move, or the erase after an insert). Owning replaces a node by an
+  // equal copy, so on bad_alloc or when there is no such entry the entries are unchanged.
+  Node** link = &root_;
+  Cell cell = root_cell_;
+  for (;;) {
+    *link = own(*link);
+    if ((*link)->leaf()) {
+      break;
     }
-    SpatialEntry* e = entries(*link);
-    std::uint32_t i = 0;
-    while (!(e[i].slot == slot && e[i].x == from_x && e[i].y == from_y)) {
-      ++i;
+    Cell child;
+    Node** next = &static_cast<Inner*>(*link)->child[child_of(cell, from_x, from_y, child)];
+    if (*next == nullptr) {
+      internal::throw_no_entry("move", slot, from_x, from_y);
     }
-    e[i].x = to_x;
+    link = next;
+    cell = child;
+  }
+  SpatialEntry* e = entries(*link);
+  const std::uint32_t count = (*link)->count;
+  std::uint32_t i = 0;
+  while (i < count && !(e[i].slot == slot && e[i].x == from_x && e[i].y == from_y)) {
+    ++i;
+  }
+  if (i == count) {
+    internal::throw_no_entry("move", slot, from_x, from_y);
+  }
+  if (contains(cell, to_x, to_y)) {
+    e[i].x = to_x;  // same leaf: in place
     e[i].y = to_y;
     return;
   }
@@ -720,6 +729,65 @@ void BasicSpatialIndex<P>::within(double x, double y, double radius, Visit&& vis
   // sqrt(prune2) rounds to within an ulp of the pruning radius; the relative 2^-30 covers it.
   const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
   within_node(root_, root_cell_, x, y, r2, prune2, reach, visit);
+}
+
+template <class P>
+auto BasicSpatialIndex<P>::covering(double min_x, double min_y, double max_x,
+                                    double max_y) const noexcept -> Subtree {
+  Subtree out;
+  if (root_ == nullptr || !contains(root_cell_, min_x, min_y) ||
+      !contains(root_cell_, max_x, max_y)) {
+    return out;
+  }
+  const Node* node = root_;
+  Cell cell = root_cell_;
+  while (!node->leaf()) {
+    Cell low;
+    Cell high;
+    const unsigned i = child_of(cell, min_x, min_y, low);
+    if (i != child_of(cell, max_x, max_y, high)) {
+      break;  // the box straddles this node's children
+    }
+    const Node* child = static_cast<const Inner*>(node)->child[i];
+    if (child == nullptr) {
+      break;
+    }
+    node = child;
+    cell = low;
+  }
+  out.node_ = node;
+  out.x_ = cell.x;
+  out.y_ = cell.y;
+  out.side_ = cell.side;
+  out.level_ = cell.level;
+  return out;
+}
+
+template <class P>
+template <class Visit>
+void BasicSpatialIndex<P>::within(const Subtree& from, double x, double y, double radius,
+                                  Visit&& visit) const {
+  if (root_ == nullptr) {
+    return;
+  }
+  if (from.node_ != nullptr) {
+    const double r2 = radius * radius;
+    const double prune2 = r2 + r2 * 0x1p-40;
+    const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
+    // Every entry the disc holds lies within `reach` of (x, y) on each axis; the margin covers
+    // the rounding of these sums. Then no entry outside the square can be a hit, and the
+    // descent below the node visits the same children in the same order as one from the root
+    // (no ancestor's square lies wholly inside the disc: each holds the square of half-side
+    // reach around (x, y)).
+    const double margin = 0x1p-30 * (std::fabs(x) + std::fabs(y) + reach);
+    if (x - reach - margin >= from.x_ && x + reach + margin < from.x_ + from.side_ &&
+        y - reach - margin >= from.y_ && y + reach + margin < from.y_ + from.side_) {
+      const Cell cell{from.x_, from.y_, from.side_, from.level_};
+      within_node(static_cast<const Node*>(from.node_), cell, x, y, r2, prune2, reach, visit);
+      return;
+    }
+  }
+  within(x, y, radius, visit);
 }
 
 template <class P>

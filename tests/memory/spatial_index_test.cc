@@ -139,6 +139,36 @@ template <class Index>
              << "within(" << query.x << ", " << query.y << ", " << query.r << "): " << got.size()
              << " entries, brute force " << brute_within(oracle, query.x, query.y, query.r).size();
     }
+    // From a subtree: the box covered is the disc's own square (exactly: the disc touches the
+    // node's boundary), padded, or some other box (then the query must fall back to the root);
+    // the same entries in the same order as from the root.
+    {
+      const double pads[] = {0.0, 1e-9, 0.5, 0.2 * extent};
+      const double pad = pads[rng() % std::size(pads)];
+      double bx = query.x;
+      double by = query.y;
+      if (q % 5 == 1) {  // a box elsewhere
+        bx = lo_x + extent * unit(rng);
+        by = lo_y + extent * unit(rng);
+      }
+      const double half = (q % 7 == 3) ? 0.0 : query.r + pad;
+      const auto from = index.covering(bx - half, by - half, bx + half, by + half);
+      if (!oracle.empty() && from.empty() && std::fabs(bx) + half < 1.0) {
+        return ::testing::AssertionFailure() << "covering a box near the origin is empty";
+      }
+      std::vector<SpatialEntry> from_root;
+      index.within(query.x, query.y, query.r,
+                   [&](const SpatialEntry& e) { from_root.push_back(e); });
+      std::vector<SpatialEntry> from_node;
+      index.within(from, query.x, query.y, query.r,
+                   [&](const SpatialEntry& e) { from_node.push_back(e); });
+      if (from_node != from_root) {
+        return ::testing::AssertionFailure()
+               << "within(subtree of side " << from.side() << ", " << query.x << ", " << query.y
+               << ", " << query.r << "): " << from_node.size() << " entries, from the root "
+               << from_root.size() << " (or in another order)";
+      }
+    }
     const double heading = (unit(rng) - 0.5) * 4.0 * std::numbers::pi;
     const double fov = (q % 5 == 0) ? 2.0 * std::numbers::pi : unit(rng) * 1.5 * std::numbers::pi;
     got.clear();
@@ -348,6 +378,11 @@ TYPED_TEST(SpatialIndexTest, GridQueriesExactlyOnTheRadius) {
         std::vector<SpatialEntry> got;
         index.within(qx, qy, r, [&](const SpatialEntry& e) { got.push_back(e); });
         ASSERT_EQ(sorted(got), brute_within(oracle, qx, qy, r)) << qx << " " << qy << " " << r;
+        // From the node covering the disc's square exactly (its boundary through grid points).
+        std::vector<SpatialEntry> from_node;
+        index.within(index.covering(qx - r, qy - r, qx + r, qy + r), qx, qy, r,
+                     [&](const SpatialEntry& e) { from_node.push_back(e); });
+        ASSERT_EQ(from_node, got) << qx << " " << qy << " " << r;
         got.clear();
         index.in_footprint(qx, qy, std::numbers::pi / 2, r, std::numbers::pi / 2,
                            [&](const SpatialEntry& e) { got.push_back(e); });
@@ -356,6 +391,40 @@ TYPED_TEST(SpatialIndexTest, GridQueriesExactlyOnTheRadius) {
       }
     }
   }
+}
+
+TYPED_TEST(SpatialIndexTest, CoveringDescendsToTheSmallestSquare) {
+  // 4096 points on a 1 m grid over [0, 64)^2: a box inside one 8 m cell of the grid is covered
+  // by a node of side at most 8 m; a box across the origin only by the root; an empty index or
+  // a box outside the root's square gives an empty subtree, and queries from it still answer.
+  typename TestFixture::IndexType index(this->heap_);
+  EXPECT_TRUE(index.covering(0.0, 0.0, 1.0, 1.0).empty());
+  Slot slot = 0;
+  for (int x = 0; x < 64; ++x) {
+    for (int y = 0; y < 64; ++y) {
+      index.insert(slot++, x + 0.25, y + 0.25);
+    }
+  }
+  const auto small = index.covering(17.0, 41.0, 23.5, 47.5);
+  ASSERT_FALSE(small.empty());
+  EXPECT_LE(small.side(), 8.0);
+  EXPECT_GE(small.side(), 0.5);
+  const auto across = index.covering(-1.0, -1.0, 1.0, 1.0);
+  ASSERT_FALSE(across.empty());
+  EXPECT_GE(across.side(), 128.0);
+  EXPECT_TRUE(index.covering(-1e300, 0.0, 0.0, 1.0).empty());
+  Oracle oracle;
+  index.for_each([&](const SpatialEntry& e) { oracle.push_back(e); });
+  for (const auto& from : {small, across, decltype(small){}}) {
+    // A disc inside `small`, and one outside it (answered from the root).
+    for (const auto& [qx, qy] : {std::pair{20.0, 44.0}, std::pair{60.0, 5.0}}) {
+      std::vector<SpatialEntry> got;
+      index.within(from, qx, qy, 2.0, [&](const SpatialEntry& e) { got.push_back(e); });
+      EXPECT_EQ(got.size(), 13u) << from.side();
+      EXPECT_EQ(sorted(got), brute_within(oracle, qx, qy, 2.0)) << from.side();
+    }
+  }
+  index.clear();
 }
 
 TYPED_TEST(SpatialIndexTest, RootGrowsAndShrinks) {
