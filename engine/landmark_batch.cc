@@ -27,6 +27,57 @@ constexpr std::size_t kChunk = 64;
   return a - shift;
 }
 
+// The terms one lane's update and proposal share: the sensor position, the innovation
+// (v0, v1), G_mu, A = G_mu Sigma and Q = G_mu Sigma G_mu^T + R (symmetrised as
+// evaluate_observation does); `good` is false where the lane must take the scalar path.
+struct LaneTerms {
+  double sx, sy, dx, dy, inv_q, inv_r, v0, v1;
+  double g00, g01, g10, g11, a00, a01, a10, a11, q00, q01, q11;
+  bool good;
+};
+
+template <bool kOffset>
+[[gnu::always_inline]] inline LaneTerms lane_terms(const SensorOffset& off, double yaw, double r00,
+                                                   double r01, double r11, double z0, double z1,
+                                                   double x, double y, double th, double mx,
+                                                   double my, double cxx, double cxy,
+                                                   double cyy) noexcept {
+  LaneTerms t;
+  t.sx = x;
+  t.sy = y;
+  t.good = std::fabs(th) <= kPi;
+  if constexpr (kOffset) {
+    double c = 0.0;
+    double s = 0.0;
+    parallel::internal::sincos(th, c, s);
+    t.sx = t.sx + (off.x * c - off.y * s);
+    t.sy = t.sy + (off.x * s + off.y * c);
+  }
+  t.dx = mx - t.sx;
+  t.dy = my - t.sy;
+  const double q = t.dx * t.dx + t.dy * t.dy;
+  const double range = std::sqrt(q);
+  t.inv_q = 1.0 / q;
+  t.inv_r = range * t.inv_q;
+  // Bearing in [-pi, pi] minus a heading and a yaw in (-pi, pi]: two exact steps wrap it.
+  const double bearing = wrap_step(wrap_step(arctan2(t.dy, t.dx) - th - yaw));
+  t.v0 = z0 - range;
+  t.v1 = wrap_step(z1 - bearing);
+  t.good = t.good & (q > 0.0) & (q < 1e300) & (t.v1 > -kPi) & (t.v1 <= kPi);
+  t.g00 = t.dx * t.inv_r;
+  t.g01 = t.dy * t.inv_r;
+  t.g10 = -t.dy * t.inv_q;
+  t.g11 = t.dx * t.inv_q;
+  t.a00 = t.g00 * cxx + t.g01 * cxy;
+  t.a01 = t.g00 * cxy + t.g01 * cyy;
+  t.a10 = t.g10 * cxx + t.g11 * cxy;
+  t.a11 = t.g10 * cxy + t.g11 * cyy;
+  t.q00 = t.a00 * t.g00 + t.a01 * t.g01 + r00;
+  t.q01 = 0.5 * ((t.a00 * t.g10 + t.a01 * t.g11 + r01) + (t.a10 * t.g00 + t.a11 * t.g01 + r01));
+  t.q11 = t.a10 * t.g10 + t.a11 * t.g11 + r11;
+  return t;
+}
+
 // The scalar EKF of engine/landmark_ekf.h for one lane.
 void update_lane_scalar(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
                         const Eigen::Vector2d& z, PoseLanes pose, LandmarkLanes lm, double* log_w,
@@ -55,45 +106,27 @@ void update_chunk(const SensorOffset& off, double yaw, double r00, double r01, d
                   double* __restrict log_w, std::size_t count, double* __restrict fallback) {
   // Restrict-qualified parameters (not struct members): GCC then needs no alias checks.
   for (std::size_t l = 0; l < count; ++l) {
-    const double th = pt[l];
-    double sx = px[l];
-    double sy = py[l];
-    bool good = std::fabs(th) <= kPi;
-    if constexpr (kOffset) {
-      double c = 0.0;
-      double s = 0.0;
-      parallel::internal::sincos(th, c, s);
-      sx = sx + (off.x * c - off.y * s);
-      sy = sy + (off.x * s + off.y * c);
-    }
     const double mx = lx[l];
     const double my = ly[l];
     const double cxx = lxx[l];
     const double cxy = lxy[l];
     const double cyy = lyy[l];
-    const double dx = mx - sx;
-    const double dy = my - sy;
-    const double q = dx * dx + dy * dy;
-    const double range = std::sqrt(q);
-    const double inv_q = 1.0 / q;
-    const double inv_r = range * inv_q;
-    // Bearing in [-pi, pi] minus a heading and a yaw in (-pi, pi]: two exact steps wrap it.
-    const double bearing = wrap_step(wrap_step(arctan2(dy, dx) - th - yaw));
-    const double v0 = z0 - range;
-    const double v1 = wrap_step(z1 - bearing);
-    good = good & (q > 0.0) & (q < 1e300) & (v1 > -kPi) & (v1 <= kPi);
-    // G_mu, then G Sigma, Q = G Sigma G^T + R (symmetrised as evaluate_observation does).
-    const double g00 = dx * inv_r;
-    const double g01 = dy * inv_r;
-    const double g10 = -dy * inv_q;
-    const double g11 = dx * inv_q;
-    const double a00 = g00 * cxx + g01 * cxy;
-    const double a01 = g00 * cxy + g01 * cyy;
-    const double a10 = g10 * cxx + g11 * cxy;
-    const double a11 = g10 * cxy + g11 * cyy;
-    const double q00 = a00 * g00 + a01 * g01 + r00;
-    const double q01 = 0.5 * ((a00 * g10 + a01 * g11 + r01) + (a10 * g00 + a11 * g01 + r01));
-    const double q11 = a10 * g10 + a11 * g11 + r11;
+    const LaneTerms t = lane_terms<kOffset>(off, yaw, r00, r01, r11, z0, z1, px[l], py[l], pt[l],
+                                            mx, my, cxx, cxy, cyy);
+    bool good = t.good;
+    const double v0 = t.v0;
+    const double v1 = t.v1;
+    const double g00 = t.g00;
+    const double g01 = t.g01;
+    const double g10 = t.g10;
+    const double g11 = t.g11;
+    const double a00 = t.a00;
+    const double a01 = t.a01;
+    const double a10 = t.a10;
+    const double a11 = t.a11;
+    const double q00 = t.q00;
+    const double q01 = t.q01;
+    const double q11 = t.q11;
     const double det = q00 * q11 - q01 * q01;
     good = good & (det > 0.0) & (det < 1e300);
     const double inv_det = 1.0 / det;
@@ -245,44 +278,26 @@ void fold_chunk(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, const
       for (int j = i; j < N; ++j) pc[i][j] = pc[j][i] = cov[upper<N>(i, j)][l];
     }
     const double th = m[2];
-    double sx = m[0];
-    double sy = m[1];
-    bool good = std::fabs(th) <= kPi;
-    if constexpr (kOffset) {
-      double c = 0.0;
-      double sn = 0.0;
-      parallel::internal::sincos(th, c, sn);
-      sx = sx + (off.x * c - off.y * sn);
-      sy = sy + (off.x * sn + off.y * c);
-    }
-    // d(d)/d(theta) = (p_y - y, -(p_x - x)); zero without an offset.
-    const double ex = sy - m[1];
-    const double ey = m[0] - sx;
     const double cxx = land[2][l];
     const double cxy = land[3][l];
     const double cyy = land[4][l];
-    const double dx = land[0][l] - sx;
-    const double dy = land[1][l] - sy;
-    const double q = dx * dx + dy * dy;
-    const double range = std::sqrt(q);
-    const double inv_q = 1.0 / q;
-    const double inv_r = range * inv_q;
-    const double bearing = wrap_step(wrap_step(arctan2(dy, dx) - th - yaw));
-    const double v0 = z0 - range;
-    const double v1 = wrap_step(z1 - bearing);
-    good = good & (q > 0.0) & (q < 1e300) & (v1 > -kPi) & (v1 <= kPi);
-    // G_mu, Q = G_mu Sigma G_mu^T + R (eq. 42).
-    const double g00 = dx * inv_r;
-    const double g01 = dy * inv_r;
-    const double g10 = -dy * inv_q;
-    const double g11 = dx * inv_q;
-    const double a00 = g00 * cxx + g01 * cxy;
-    const double a01 = g00 * cxy + g01 * cyy;
-    const double a10 = g10 * cxx + g11 * cxy;
-    const double a11 = g10 * cxy + g11 * cyy;
-    const double q00 = a00 * g00 + a01 * g01 + r00;
-    const double q01 = 0.5 * ((a00 * g10 + a01 * g11 + r01) + (a10 * g00 + a11 * g01 + r01));
-    const double q11 = a10 * g10 + a11 * g11 + r11;
+    const LaneTerms t = lane_terms<kOffset>(off, yaw, r00, r01, r11, z0, z1, m[0], m[1], th,
+                                            land[0][l], land[1][l], cxx, cxy, cyy);
+    const double sx = t.sx;
+    const double sy = t.sy;
+    const double dx = t.dx;
+    const double dy = t.dy;
+    const double inv_q = t.inv_q;
+    const double inv_r = t.inv_r;
+    // d(d)/d(theta) = (p_y - y, -(p_x - x)); zero without an offset.
+    const double ex = sy - m[1];
+    const double ey = m[0] - sx;
+    bool good = t.good;
+    const double v0 = t.v0;
+    const double v1 = t.v1;
+    const double q00 = t.q00;
+    const double q01 = t.q01;
+    const double q11 = t.q11;
     // G_s: three nonzero columns.
     const double s00 = -dx * inv_r;
     const double s01 = -dy * inv_r;
