@@ -245,6 +245,19 @@ def log_axis(axis):
     axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
 
 
+def style_error_axes(ax, xlabel, title, log_x_labels=True):
+    """An RMS error panel on log-log axes (x ticks plain numbers unless the caller sets them)."""
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    log_axis(ax.yaxis)
+    if log_x_labels:
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("RMS error (m)")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+
+
 def series_of(rows, series, x):
     chosen = sorted((r for r in rows if r["series"] == series), key=lambda r: r[x])
     return chosen
@@ -290,14 +303,7 @@ def plot_particles(out):
         mean, sem = ekf[f"{metric}_mean"], ekf[f"{metric}_sem"]
         ax.axhline(mean, color="black", linestyle="--", label="EKF")
         ax.axhspan(mean - sem, mean + sem, color="black", alpha=0.1, linewidth=0)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        log_axis(ax.yaxis)
-        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
-        ax.set_xlabel("particles M")
-        ax.set_ylabel("RMS error (m)")
-        ax.set_title(title)
-        ax.grid(True, which="both", alpha=0.3)
+        style_error_axes(ax, "particles M", title)
         ax.legend()
     fig.suptitle(f"Accuracy against particles, simulated loop world of ~100 landmarks, "
                  f"known data association\n(mean of {seeds} seeds, bars: standard error)")
@@ -389,14 +395,8 @@ def plot_measurement_noise(out):
         for algorithm in ("fastslam1", "fastslam2"):
             plot_series(ax, rows, algorithm, "sigma_range", metric)
         ax.axvline(SIGMA_RANGE, color="gray", linestyle=":", label="simulator default")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        log_axis(ax.yaxis)
-        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
-        ax.set_xlabel("measurement noise: range σ (m); bearing σ = 10 deg/m × range σ")
-        ax.set_ylabel("RMS error (m)")
-        ax.set_title(title)
-        ax.grid(True, which="both", alpha=0.3)
+        style_error_axes(ax, "measurement noise: range σ (m); bearing σ = 10 deg/m × range σ",
+                         title)
         ax.legend()
     fig.suptitle(f"Error against measurement noise, M = {m}, known data association, "
                  f"~100-landmark loop world\n(mean of {seeds} seeds, bars: standard error)")
@@ -493,16 +493,11 @@ def plot_loop_size(out):
                             markersize=4, color=COLORS[algorithm],
                             linestyle="-" if m_ == max(ms) else "--",
                             label=f"{LABELS[algorithm]}, M = {m_}")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        log_axis(ax.yaxis)
+        style_error_axes(ax, f"loop length (m), driven {'once' if loops == '1' else 'twice'}",
+                         title, log_x_labels=False)
         ax.set_xticks(lengths)
         ax.set_xticklabels([str(x) for x in lengths])
         ax.minorticks_off()
-        ax.set_xlabel(f"loop length (m), driven {'once' if loops == '1' else 'twice'}")
-        ax.set_ylabel("RMS error (m)")
-        ax.set_title(title)
-        ax.grid(True, which="both", alpha=0.3)
         ax.legend()
     ax = axes[2]
     styles = {1: ":", 5: "-.", 10: "-.", 100: "-"}

@@ -13,15 +13,12 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/tools/temp_path.h"
+
 namespace fastslam::tools {
 namespace {
 
-std::string temp_dir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("fastslam_" + name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  return dir.string();
-}
+using testing::temp_path;
 
 // The tiny run of `fastslam experiment lg-slam --tiny` (3 seeds, 2000 steps): the CSV has the
 // contracted header, one row per recorded step, seed and variant, finite errors, and the map
@@ -32,7 +29,7 @@ std::string temp_dir(const std::string& name) {
 // 0.1 m.
 TEST(LgSlamExperiment, TinyRunWritesTheCsvAndTheMapErrorsShrink) {
   LgSlamExperimentOptions options;
-  options.out = temp_dir("lg_slam");
+  options.out = temp_path("lg_slam");
   options.tiny = true;
   ASSERT_EQ(run_lg_slam_command(options), 0);
 

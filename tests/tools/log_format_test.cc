@@ -1,7 +1,5 @@
 #include "tools/log_format.h"
 
-#include <unistd.h>
-
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -11,10 +9,13 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <unistd.h>
 #include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "tests/tools/temp_path.h"
 
 namespace fastslam::tools {
 namespace {
@@ -111,9 +112,7 @@ TEST(LogFormat, EqualityNoticesAOneUlpChange) {
 
 TEST(LogFormat, FileRoundTripAndTheDocumentedShape) {
   const Log log = sample_log(engine::MotionKind::kVictoriaPark);
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            ("fastslam_log_test_" + std::to_string(::getpid()) + ".log"))
-                               .string();
+  const std::string path = testing::temp_path("log_test") + ".log";
   write_log(path, log);
   EXPECT_TRUE(read_log(path) == log);
   std::ifstream in(path);
@@ -248,9 +247,7 @@ TEST(LogFormat, WriterRefusesWhatWouldNotReadBack) {
   // To a path: nothing is left behind.
   Log bad = log;
   bad.header.sensor.max_range = std::numeric_limits<double>::infinity();
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            ("fastslam_log_bad_" + std::to_string(::getpid()) + ".log"))
-                               .string();
+  const std::string path = testing::temp_path("log_bad") + ".log";
   EXPECT_THROW(write_log(path, bad), std::invalid_argument);
   EXPECT_FALSE(std::filesystem::exists(path));
 }

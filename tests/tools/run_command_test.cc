@@ -16,17 +16,13 @@
 
 #include "engine/motion_model.h"
 #include "tests/shared_data.h"
+#include "tests/tools/temp_path.h"
 #include "tools/log_format.h"
 
 namespace fastslam::tools {
 namespace {
 
-std::string temp_dir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("fastslam_" + name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  return dir.string();
-}
+using testing::temp_path;
 
 std::size_t line_count(const std::string& path) {
   std::ifstream in(path);
@@ -41,7 +37,7 @@ TEST(RunCommand, WebmapWritesTheContractedOutputs) {
   o.landmarks_csv = shared + "/data/bailey_sim/example_webmap_landmarks.csv";
   o.waypoints_csv = shared + "/data/bailey_sim/example_webmap_waypoints.csv";
   o.sim.loops = 2;
-  o.out = temp_dir("run_webmap");
+  o.out = temp_path("run_webmap");
   o.progress = false;
   ASSERT_EQ(run_simulation(o), 0);
   std::ifstream in(o.out + "/metrics.json");
@@ -82,7 +78,7 @@ TEST(RunCommand, MaximumLikelihoodWithClutterReportsTheMapScores) {
   o.filter.particles = 30;
   o.filter.association = engine::Association::kMaximumLikelihood;
   o.match_radius = 2.0;
-  o.out = temp_dir("run_ml");
+  o.out = temp_path("run_ml");
   ASSERT_EQ(run_simulation(o), 0);
   std::ifstream in(o.out + "/metrics.json");
   const nlohmann::json m = nlohmann::json::parse(in);
@@ -121,7 +117,7 @@ TEST(RunCommand, SmallGridRunsWithBothAlgorithms) {
     o.filter.algorithm = algorithm;
     o.filter.particles = 20;
     o.sim.loops = 1;
-    o.out = temp_dir("run_grid");
+    o.out = temp_path("run_grid");
     ASSERT_EQ(run_simulation(o), 0);
     std::ifstream in(o.out + "/metrics.json");
     const nlohmann::json m = nlohmann::json::parse(in);
@@ -154,12 +150,12 @@ TEST(RunCommand, OutDirectoryGetsTheMapPicture) {
   o.progress = false;
   o.landmarks = 400;
   o.filter.particles = 10;
-  o.out = temp_dir("run_picture");
+  o.out = temp_path("run_picture");
   o.plot_script = default_plot_script();
   ASSERT_EQ(run_simulation(o), 0);
   EXPECT_GT(std::filesystem::file_size(o.out + "/map.png"), 10'000u);
 
-  o.out = temp_dir("run_picture_failing_script");
+  o.out = temp_path("run_picture_failing_script");
   o.plot_script = o.out + "/no_such_script.py";
   ASSERT_EQ(run_simulation(o), 0);
   EXPECT_TRUE(std::filesystem::exists(o.out + "/metrics.json"));
@@ -173,7 +169,7 @@ TEST(RunCommand, GridAndLoopDefaultsResolvePerWorld) {
   o.progress = false;
   o.landmarks = 400;
   o.filter.particles = 10;
-  o.out = temp_dir("run_defaults");
+  o.out = temp_path("run_defaults");
   ASSERT_EQ(run_simulation(o), 0);
   nlohmann::json m = read_metrics(o.out);
   EXPECT_EQ(m["scan_period_s"], kDefaultGridScanPeriod);
@@ -207,7 +203,7 @@ TEST(RunCommand, GridAndLoopDefaultsResolvePerWorld) {
   o.world = "loop";
   o.loop_length = 300.0;
   o.filter.particles = 10;
-  o.out = temp_dir("run_defaults");
+  o.out = temp_path("run_defaults");
   ASSERT_EQ(run_simulation(o), 0);
   m = read_metrics(o.out);
   EXPECT_EQ(m["scan_period_s"], 0.2);
@@ -235,7 +231,7 @@ TEST(RunCommand, LogRoundTripGivesTheDirectRunsMetrics) {
     o.filter.particles = 16;
     o.filter.seed = 11;
     o.sim.loops = 1;
-    const std::string log_path = temp_dir("round_trip") + ".log";
+    const std::string log_path = temp_path("round_trip") + ".log";
     RunOptions convert = o;
     convert.out = log_path;
     ASSERT_EQ(convert_to_log(convert), 0);
@@ -244,12 +240,12 @@ TEST(RunCommand, LogRoundTripGivesTheDirectRunsMetrics) {
     EXPECT_EQ(log.header.motion.kind, engine::MotionKind::kBaileyCar);
     EXPECT_GT(log.landmarks.size(), 100u);
 
-    o.out = temp_dir("direct");
+    o.out = temp_path("direct");
     ASSERT_EQ(run_simulation(o), 0);
     RunOptions from_log = o;
     from_log.source = "log";
     from_log.data = log_path;
-    from_log.out = temp_dir("from_log");
+    from_log.out = temp_path("from_log");
     ASSERT_EQ(run_simulation(from_log), 0);
     const nlohmann::json direct = read_metrics(o.out);
     const nlohmann::json logged = read_metrics(from_log.out);
@@ -305,14 +301,14 @@ TEST(RunCommand, GpsAndPoseErrorsInterpolateAndSkipGaps) {
   control(12.0, 2.0);                     // the estimate jumps 2 s: a gap
   fix(EventKind::kGps, 12.0, 12.0, 0.0);  // exactly at an estimate: error 0
   fix(EventKind::kGps, 13.0, 13.0, 0.0);  // after the last estimate: skipped
-  const std::string path = temp_dir("gps") + ".log";
+  const std::string path = temp_path("gps") + ".log";
   write_log(path, log);
   RunOptions o;
   o.progress = false;
   o.source = "log";
   o.data = path;
   o.filter.particles = 3;
-  o.out = temp_dir("gps_run");
+  o.out = temp_path("gps_run");
   ASSERT_EQ(run_simulation(o), 0);
   const nlohmann::json m = read_metrics(o.out);
   EXPECT_EQ(m["gps_fixes_used"], 4);
@@ -359,14 +355,14 @@ TEST(RunCommand, StartHeadingOverrideAndTheAlignedGpsError) {
       ++fixes;
     }
   }
-  const std::string path = temp_dir("heading") + ".log";
+  const std::string path = temp_path("heading") + ".log";
   write_log(path, log);
   RunOptions o;
   o.progress = false;
   o.source = "log";
   o.data = path;
   o.filter.particles = 2;
-  o.out = temp_dir("heading_run");
+  o.out = temp_path("heading_run");
   ASSERT_EQ(run_simulation(o), 0);
   nlohmann::json m = read_metrics(o.out);
   EXPECT_NEAR(m["gps_rmse_m"].get<double>(), 0.0, 1e-9);
@@ -408,7 +404,7 @@ TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
   g.x = 10.0;
   g.y = -4.0;
   log.events.push_back(g);
-  const std::string path = temp_dir("none") + ".log";
+  const std::string path = temp_path("none") + ".log";
   write_log(path, log);
   RunOptions o;
   o.progress = false;
@@ -417,7 +413,7 @@ TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
   o.filter.particles = 2;
   o.motion = "none";
   o.no_odometry_sigma[0] = o.no_odometry_sigma[1] = 0.0;
-  o.out = temp_dir("none_run");
+  o.out = temp_path("none_run");
   ASSERT_EQ(run_simulation(o), 0);
   const nlohmann::json m = read_metrics(o.out);
   EXPECT_EQ(m["motion"], "none");
@@ -434,7 +430,7 @@ TEST(RunCommand, LogSourceRefusesAMissingOrMalformedLog) {
   o.progress = false;
   o.source = "log";
   EXPECT_THROW(run_simulation(o), std::invalid_argument);  // no --data
-  o.data = temp_dir("bad") + ".log";
+  o.data = temp_path("bad") + ".log";
   std::ofstream(o.data) << "fastslam-log 1\nmotion unicycle\n";
   try {
     run_simulation(o);
@@ -454,7 +450,7 @@ TEST(RunCommand, EkfOnWebmapWritesTheSameOutputs) {
   o.waypoints_csv = shared + "/data/bailey_sim/example_webmap_waypoints.csv";
   o.sim.loops = 2;
   o.filter.algorithm = engine::Algorithm::kEkf;
-  o.out = temp_dir("run_webmap_ekf");
+  o.out = temp_path("run_webmap_ekf");
   o.progress = false;
   ASSERT_EQ(run_simulation(o), 0);
   std::ifstream in(o.out + "/metrics.json");
@@ -480,7 +476,7 @@ TEST(RunCommand, EkfWithMaximumLikelihoodOnASmallGrid) {
   o.filter.algorithm = engine::Algorithm::kEkf;
   o.filter.association = engine::Association::kMaximumLikelihood;
   o.sim.loops = 1;
-  o.out = temp_dir("run_grid_ekf");
+  o.out = temp_path("run_grid_ekf");
   ASSERT_EQ(run_simulation(o), 0);
   std::ifstream in(o.out + "/metrics.json");
   const nlohmann::json m = nlohmann::json::parse(in);
@@ -533,11 +529,11 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     o.filter.algorithm = c.algorithm;
     o.filter.association = c.association;
     o.filter.particles = c.particles;
-    o.out = temp_dir("trace_plain");
+    o.out = temp_path("trace_plain");
     ASSERT_EQ(run_simulation(o), 0);
     const nlohmann::json plain = read_metrics(o.out);
     RunOptions traced = o;
-    traced.out = temp_dir("trace_every");
+    traced.out = temp_path("trace_every");
     traced.trace = traced.out + ".csv";
     ASSERT_EQ(run_simulation(traced), 0);
     const nlohmann::json m = read_metrics(traced.out);
@@ -580,7 +576,7 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     // Every 7th scan: rows for scans 0, 7, 14, ...
     RunOptions sparse = o;
     sparse.out.clear();
-    sparse.trace = temp_dir("trace_sparse") + ".csv";
+    sparse.trace = temp_path("trace_sparse") + ".csv";
     sparse.trace_every = 7;
     ASSERT_EQ(run_simulation(sparse), 0);
     const auto sparse_rows = csv_rows(sparse.trace, nullptr);
@@ -598,7 +594,7 @@ TEST(RunCommand, TraceRefusesAnUnwritablePathBeforeRunning) {
   RunOptions o;
   o.progress = false;
   o.landmarks = 50;
-  o.trace = temp_dir("no_such_dir") + "/trace.csv";
+  o.trace = temp_path("no_such_dir") + "/trace.csv";
   try {
     run_simulation(o);
     ADD_FAILURE() << "an unwritable trace was accepted";
@@ -617,7 +613,7 @@ TEST(RunCommand, SimulatorNoiseScalesTheTruthAndTheFilter) {
   o.sim.loops = 1;
   o.filter.particles = 1;
   o.filter.algorithm = engine::Algorithm::kFastSlam2;
-  o.out = temp_dir("sim_noise_default");
+  o.out = temp_path("sim_noise_default");
   ASSERT_EQ(run_simulation(o), 0);
   const double noisy = read_metrics(o.out)["pose_rmse_m"].get<double>();
   RunOptions quiet = o;
@@ -625,7 +621,7 @@ TEST(RunCommand, SimulatorNoiseScalesTheTruthAndTheFilter) {
   quiet.sim.sigma_steer = 0.0;
   quiet.sim.sigma_range = 1e-4;
   quiet.sim.sigma_bearing = 1e-5;
-  quiet.out = temp_dir("sim_noise_quiet");
+  quiet.out = temp_path("sim_noise_quiet");
   ASSERT_EQ(run_simulation(quiet), 0);
   const double exact = read_metrics(quiet.out)["pose_rmse_m"].get<double>();
   // With no control noise the prediction is the truth (dead reckoning is exact).

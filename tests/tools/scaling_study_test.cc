@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "memory/landmark_tree.h"
+#include "tests/tools/temp_path.h"
 
 namespace fastslam::tools {
 namespace {
@@ -29,9 +30,7 @@ TEST(ScalingStudy, PointsShareOneMapAndTheJsonHasTheContractedKeys) {
     o.particles = {20};
     o.threads = {2};
     o.filter.association = association;
-    const std::string json = (std::filesystem::temp_directory_path() /
-                              ("fastslam_scaling_" + std::to_string(::getpid()) + ".json"))
-                                 .string();
+    const std::string json = testing::temp_path("scaling") + ".json";
     ASSERT_EQ(run_scaling_command(o, json), 0);
     std::ifstream in(json);
     const nlohmann::json j = nlohmann::json::parse(in);
@@ -113,9 +112,7 @@ TEST(ScalingStudy, ListsMakeOnePointPerCombinationInJsonAndCsv) {
   o.filter.grain = 8;  // let 16 particles split over two threads
   o.updates = 30;
   o.repeats = 2;
-  const std::string base = (std::filesystem::temp_directory_path() /
-                            ("fastslam_scaling_lists_" + std::to_string(::getpid())))
-                               .string();
+  const std::string base = testing::temp_path("scaling_lists");
   ASSERT_EQ(run_scaling_command(o, base + ".json", base + ".csv"), 0);
   std::ifstream in(base + ".json");
   const nlohmann::json j = nlohmann::json::parse(in);

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tests/shared_data.h"
+#include "tests/tools/temp_path.h"
 #include "tools/command_line.h"
 #include "tools/run_command.h"
 
@@ -22,10 +23,7 @@ namespace {
 
 // Parses `args` as `fastslam run` does, runs it into a temporary directory, returns metrics.json.
 nlohmann::json run(const std::string& args, const std::string& name) {
-  const std::string out = (std::filesystem::temp_directory_path() /
-                           ("fastslam_vp_" + name + "_" + std::to_string(::getpid())))
-                              .string();
-  std::filesystem::remove_all(out);
+  const std::string out = testing::temp_path("vp_" + name);
   CLI::App app;
   RunOptions o;
   RunWords w;
