@@ -132,6 +132,19 @@ nlohmann::json read_metrics(const std::string& dir) {
   return nlohmann::json::parse(in);
 }
 
+// Options that run `log`, written to a scratch file named after `name`, with M particles.
+RunOptions log_run(const Log& log, const std::string& name, std::uint32_t particles) {
+  const std::string path = temp_path(name) + ".log";
+  write_log(path, log);
+  RunOptions o;
+  o.progress = false;
+  o.source = "log";
+  o.data = path;
+  o.filter.particles = particles;
+  o.out = temp_path(name + "_run");
+  return o;
+}
+
 // Control steps of 0.025 s per scan of `period`: the simulator scans once its floating-point sum
 // of dt reaches the period.
 std::uint64_t steps_per_scan(double period) {
@@ -301,14 +314,7 @@ TEST(RunCommand, GpsAndPoseErrorsInterpolateAndSkipGaps) {
   control(12.0, 2.0);                     // the estimate jumps 2 s: a gap
   fix(EventKind::kGps, 12.0, 12.0, 0.0);  // exactly at an estimate: error 0
   fix(EventKind::kGps, 13.0, 13.0, 0.0);  // after the last estimate: skipped
-  const std::string path = temp_path("gps") + ".log";
-  write_log(path, log);
-  RunOptions o;
-  o.progress = false;
-  o.source = "log";
-  o.data = path;
-  o.filter.particles = 3;
-  o.out = temp_path("gps_run");
+  RunOptions o = log_run(log, "gps", 3);
   ASSERT_EQ(run_simulation(o), 0);
   const nlohmann::json m = read_metrics(o.out);
   EXPECT_EQ(m["gps_fixes_used"], 4);
@@ -321,7 +327,7 @@ TEST(RunCommand, GpsAndPoseErrorsInterpolateAndSkipGaps) {
   EXPECT_EQ(line_count(o.out + "/gps.csv"), 6u + 1);
   EXPECT_EQ(line_count(o.out + "/trajectory.tum"), 101u + 1);
   std::filesystem::remove_all(o.out);
-  std::filesystem::remove(path);
+  std::filesystem::remove(o.data);
 }
 
 // A start heading override rotates the whole (noise-free) path about the start: the GPS fixes,
@@ -355,14 +361,7 @@ TEST(RunCommand, StartHeadingOverrideAndTheAlignedGpsError) {
       ++fixes;
     }
   }
-  const std::string path = temp_path("heading") + ".log";
-  write_log(path, log);
-  RunOptions o;
-  o.progress = false;
-  o.source = "log";
-  o.data = path;
-  o.filter.particles = 2;
-  o.out = temp_path("heading_run");
+  RunOptions o = log_run(log, "heading", 2);
   ASSERT_EQ(run_simulation(o), 0);
   nlohmann::json m = read_metrics(o.out);
   EXPECT_NEAR(m["gps_rmse_m"].get<double>(), 0.0, 1e-9);
@@ -377,7 +376,7 @@ TEST(RunCommand, StartHeadingOverrideAndTheAlignedGpsError) {
   EXPECT_NEAR(m["gps_alignment_rotation_deg"].get<double>(), -30.0, 1e-9);
   EXPECT_NEAR(m["initial_heading_deg"].get<double>(), 30.0, 1e-12);
   std::filesystem::remove_all(o.out);
-  std::filesystem::remove(path);
+  std::filesystem::remove(o.data);
 }
 
 // --motion none on a Victoria Park log: the filter tracks the rear axle, with the laser (the
@@ -404,16 +403,9 @@ TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
   g.x = 10.0;
   g.y = -4.0;
   log.events.push_back(g);
-  const std::string path = temp_path("none") + ".log";
-  write_log(path, log);
-  RunOptions o;
-  o.progress = false;
-  o.source = "log";
-  o.data = path;
-  o.filter.particles = 2;
+  RunOptions o = log_run(log, "none", 2);
   o.motion = "none";
   o.no_odometry_sigma[0] = o.no_odometry_sigma[1] = 0.0;
-  o.out = temp_path("none_run");
   ASSERT_EQ(run_simulation(o), 0);
   const nlohmann::json m = read_metrics(o.out);
   EXPECT_EQ(m["motion"], "none");
@@ -422,7 +414,7 @@ TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
   o.motion = "sideways";
   EXPECT_THROW(run_simulation(o), std::invalid_argument);
   std::filesystem::remove_all(o.out);
-  std::filesystem::remove(path);
+  std::filesystem::remove(o.data);
 }
 
 TEST(RunCommand, LogSourceRefusesAMissingOrMalformedLog) {
