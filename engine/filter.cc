@@ -8,6 +8,7 @@
 #include <cstring>
 #include <istream>
 #include <limits>
+#include <numeric>
 #include <ostream>
 #include <stdexcept>
 #include <string>
@@ -71,6 +72,15 @@ struct PhaseTimes {
 constexpr std::uint64_t kObservationsPerScanLimit = std::uint64_t{1} << 20;
 
 // Per-thread scratch of the unknown-association step of one particle.
+// The largest eigenvalue of a stored landmark's covariance, rounded up to a float: its spatial
+// index entry's extent, which gates candidates before the map is read (associate_particle).
+float largest_variance(const memory::Landmark& l) {
+  const double half_gap = 0.5 * (l.sxx - l.syy);
+  const double v = 0.5 * (l.sxx + l.syy) + std::sqrt(half_gap * half_gap + l.sxy * l.sxy);
+  const auto f = static_cast<float>(v);
+  return static_cast<double>(f) >= v ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
+}
+
 struct AssociationScratch {
   std::vector<AssociationCandidate> candidates;  // tag: index into `terms` (FastSLAM 1.0)
   std::vector<LandmarkObservation> terms;        // 1.0: each candidate's EKF terms, reused
@@ -79,7 +89,9 @@ struct AssociationScratch {
   std::vector<memory::Slot> taken;
   std::vector<memory::Slot> touched;
   std::vector<memory::SpatialEntry> in_view;
-  std::vector<std::array<double, 3>> discs;  // observation j's candidate disc: x, y, radius
+  // Observation j's candidate disc: x, y, radius (from the variance bound), and the part of the
+  // spread that is not the landmark's own (measurement, and for 2.0 the pose).
+  std::vector<std::array<double, 4>> discs;
 };
 
 // The particle blocks of a pass over m particles: whole groups of kMotionLanes particles (the
@@ -92,6 +104,10 @@ struct AssociationScratch {
 // on the calling thread: webmap FS1 with M = 100 and 2 threads took 50 ms split in two tasks
 // against 34 ms inline (a pass is ~17 us of work; the second thread adds its dispatch and
 // the cross-core traffic of the particles' maps, which the sequential resampling touches).
+// A heavy pass (`heavy`: the previous pass's work exceeded FilterConfig::split_seconds, e.g.
+// Victoria Park's association, ~5 us per particle and scan) gets at least four blocks per
+// thread whatever the grain: its work dwarfs the dispatch, and a thread slowed by another
+// process hands its blocks over instead of holding up the pass.
 // Results never depend on the blocks: each particle's work reads only its own state and
 // streams.
 struct PassBlocks {
@@ -99,9 +115,10 @@ struct PassBlocks {
   std::size_t groups = 0;
   std::size_t tasks = 0;
 
-  PassBlocks(std::size_t particles, unsigned threads, std::size_t grain)
+  PassBlocks(std::size_t particles, unsigned threads, std::size_t grain, bool heavy)
       : m(particles), groups((particles + kMotionLanes - 1) / kMotionLanes) {
     tasks = (particles + grain - 1) / grain;
+    if (heavy) tasks = std::max<std::size_t>(tasks, 4 * std::size_t{threads});
     if (threads > 1 && tasks > 1) tasks = (tasks + threads - 1) / threads * threads;
     tasks = std::clamp<std::size_t>(tasks, 1, std::max<std::size_t>(groups, 1));
   }
@@ -189,8 +206,9 @@ struct Filter::Impl {
       recorded.assign(pending.size() * m * 4, 0.0);
       snapshot_weights();
     }
-    const PassBlocks blocks(m, kernel.threads(), config.grain);
-    auto run_block = [&](std::size_t begin, std::size_t end) {
+    const PassBlocks blocks(m, kernel.threads(), config.grain, heavy_pass);
+    block_seconds.assign(blocks.tasks, 0.0);
+    auto run_block = [&](std::size_t t, std::size_t begin, std::size_t end) {
       const Clock::time_point t0 = Clock::now();
       const std::size_t count = end - begin;
       if (!pending.empty()) {
@@ -233,9 +251,13 @@ struct Filter::Impl {
       times.predict += seconds_between(t0, t1);
       times.associate += associate_seconds;
       times.update += seconds_between(t1, t2) - associate_seconds;
+      block_seconds[t] = seconds_between(t0, t2);
     };
     kernel.for_each_particle(
-        blocks.tasks, [&](std::size_t t) { run_block(blocks.begin(t), blocks.begin(t + 1)); }, 1);
+        blocks.tasks, [&](std::size_t t) { run_block(t, blocks.begin(t), blocks.begin(t + 1)); },
+        1);
+    heavy_pass = std::accumulate(block_seconds.begin(), block_seconds.end(), 0.0) >
+                 config.split_seconds;
     if (record) reduce_recorded(m);
   }
 
@@ -533,13 +555,13 @@ struct Filter::Impl {
     for (std::size_t j = 0; j < scan.size(); ++j) {
       const Eigen::Vector2d& z = scan[j].z;
       const Eigen::Vector2d at = sensor.landmark_from(z, pose);
-      double spread = landmark_variance_bound + measurement_variance(z[0]);
+      double spread = measurement_variance(z[0]);
       if (fs2) {
         const double lever = z[0] + offset;
         spread += 2.0 * (prior.cov(0, 0) + prior.cov(1, 1)) + 2.0 * lever * lever * prior.cov(2, 2);
       }
-      const double radius = std::sqrt(scale2 * gate * spread);
-      scratch.discs[j] = {at[0], at[1], radius};
+      const double radius = std::sqrt(scale2 * gate * (landmark_variance_bound + spread));
+      scratch.discs[j] = {at[0], at[1], radius, spread};
       box[0] = std::min(box[0], at[0] - radius);
       box[1] = std::min(box[1], at[1] - radius);
       box[2] = std::max(box[2], at[0] + radius);
@@ -554,9 +576,15 @@ struct Filter::Impl {
             : index.covering(box[0] - pad, box[1] - pad, box[2] + pad, box[3] + pad);
     for (std::size_t j = 0; j < scan.size(); ++j) {
       const Eigen::Vector2d& z = scan[j].z;
-      const auto [at_x, at_y, radius] = scratch.discs[j];
+      const auto [at_x, at_y, radius, spread] = scratch.discs[j];
       index.within(near, at_x, at_y, radius, [&](const memory::SpatialEntry& e) {
         if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
+        // The same bound with this landmark's own largest eigenvalue (the entry's extent) in
+        // place of the map-wide one: most landmarks are far tighter than a new one at full
+        // range, so most entries of the disc stop here, before the map lookup and the
+        // trigonometry of the exact gate (Victoria Park: 17 entries a disc, 3.4 pass).
+        const double dx = e.x - at_x, dy = e.y - at_y;
+        if (dx * dx + dy * dy > scale2 * gate * (static_cast<double>(e.extent) + spread)) return;
         const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
         const auto obs = static_cast<std::uint32_t>(j);
         if (fs2) {
@@ -642,7 +670,7 @@ struct Filter::Impl {
       stored.log_odds += config.existence.seen;
       stored.last_seen = step_now;
       if (stored.x != from_x || stored.y != from_y) {
-        index.move(slot, from_x, from_y, stored.x, stored.y);
+        index.move(slot, from_x, from_y, stored.x, stored.y, largest_variance(stored));
       }
       scratch.touched.push_back(slot);
     }
@@ -682,7 +710,7 @@ struct Filter::Impl {
       stored.id = scan_step * kObservationsPerScanLimit + j;
       stored.last_seen = step_now;
       const memory::Slot slot = map.insert(stored);
-      index.insert(slot, stored.x, stored.y);
+      index.insert(slot, stored.x, stored.y, largest_variance(stored));
       ++counts.created;
     }
   }
@@ -728,6 +756,10 @@ struct Filter::Impl {
   // Unknown association: a bound on every landmark covariance's largest eigenvalue (the
   // largest of eq. 70 over the observations seen so far), for the candidate search radius.
   double landmark_variance_bound = 0.0;
+  // The work of the last pass, per block, and whether it was heavy (see PassBlocks); they
+  // decide only how the next pass is split, never a result.
+  std::vector<double> block_seconds;
+  bool heavy_pass = false;
   std::uint64_t step = 0;  // events so far (controls and scans): keys the random streams
   std::uint64_t controls = 0, scans = 0, observations = 0, resamples = 0, weight_resets = 0;
   double resample_seconds = 0.0;
@@ -857,7 +889,7 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
   for (const MapLandmark& l : landmarks) {
     memory::Landmark stored{l.x, l.y, l.sxx, l.sxy, l.syy, l.log_odds, l.id, 0};
     const memory::Slot slot = map.insert(stored);
-    if (!known_ids) index.insert(slot, l.x, l.y);
+    if (!known_ids) index.insert(slot, l.x, l.y, largest_variance(stored));
   }
   for (std::size_t i = 0; i < s.store.size(); ++i) {
     s.store.map(i) = map;
@@ -1201,7 +1233,9 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
     }
     for (memory::Slot hole : holes) map.erase(hole);
     if (!known_ids) {
-      for (const auto [slot, lm] : map) store.index(i).insert(slot, lm.x, lm.y);
+      for (const auto [slot, lm] : map) {
+        store.index(i).insert(slot, lm.x, lm.y, largest_variance(lm));
+      }
     }
   }
   return std::unique_ptr<Filter>(new Filter(std::move(impl)));

@@ -86,6 +86,7 @@ void validate(const FilterConfig& c) {
               c.resample.scheme == parallel::ResampleScheme::kMultinomial,
           "resample.scheme is not a known scheme");
   require(c.grain >= 1, "grain must be at least 1");
+  require(c.split_seconds >= 0, "split_seconds must be >= 0 (infinity: never split)");
   require(c.threads <= parallel::ParticleKernel::kMaxThreads,
           "threads must be at most " + std::to_string(parallel::ParticleKernel::kMaxThreads));
   for (double v : c.initial_pose) require(std::isfinite(v), "initial_pose must be finite");

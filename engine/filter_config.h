@@ -115,6 +115,11 @@ struct FilterConfig {
   // too small to gain from a second thread inline, and gives each thread several tasks from
   // M = 1000 up.
   std::size_t grain = 128;
+  // A pass (the controls since the last scan, and the scan) whose work took longer than this
+  // on the last pass is split into at least one block per thread, whatever the grain: Victoria
+  // Park's association (~0.5 ms a pass at M = 100) gains from a second thread, webmap's
+  // ~12 us passes lose to the dispatch. Decides only the split, never a result.
+  double split_seconds = 100e-6;
   // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
   // store per particle per control and a reduction per control).
   bool record_trajectory = false;

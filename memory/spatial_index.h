@@ -68,6 +68,10 @@ namespace fastslam::memory {
 // One entry of the index: a landmark's slot and where the index stores it.
 struct SpatialEntry {
   Slot slot = 0;
+  // A number the caller keeps with the entry and gets back from queries; the index never reads
+  // it (it fills the padding after the slot: free). The engine keeps the landmark's largest
+  // covariance eigenvalue there, so that candidates can be gated without a map lookup.
+  float extent = 0.0f;
   double x = 0.0;
   double y = 0.0;
   friend bool operator==(const SpatialEntry&, const SpatialEntry&) = default;
@@ -117,19 +121,20 @@ class BasicSpatialIndex {
     return root_ == other.root_;
   }
 
-  // Adds (slot, x, y). Throws std::invalid_argument when x or y is not finite or exceeds
+  // Adds (slot, x, y) with `extent`. Throws std::invalid_argument when x or y is not finite or exceeds
   // kMaxCoordinate in magnitude, std::length_error when a finest-size leaf is full, or
   // std::bad_alloc; then the index holds the same entries as before.
-  void insert(Slot slot, double x, double y);
+  void insert(Slot slot, double x, double y, float extent = 0.0f);
 
   // Removes the entry (slot, x, y): `x, y` is the position it is stored at, compared exactly.
   // Throws std::out_of_range when there is no such entry, or std::bad_alloc; then the index
   // holds the same entries as before.
   void erase(Slot slot, double from_x, double from_y);
 
-  // Moves the entry (slot, from) to `to`. Throws as erase (no such entry) and insert (bad `to`,
+  // Moves the entry (slot, from) to `to`, where it holds `extent`. Throws as erase (no such entry) and insert (bad `to`,
   // bad_alloc); then the index holds the same entries as before.
-  void move(Slot slot, double from_x, double from_y, double to_x, double to_y);
+  void move(Slot slot, double from_x, double from_y, double to_x, double to_y,
+            float extent = 0.0f);
 
   // Removes every entry (releases this handle's reference to the root).
   void clear() noexcept;
@@ -209,6 +214,7 @@ class BasicSpatialIndex {
     bool leaf() const noexcept { return capacity != 0; }
   };
   static_assert(sizeof(Node) == 16);
+  static_assert(sizeof(SpatialEntry) == 24, "extent must stay in the slot's padding");
   struct Inner : Node {
     Inner() noexcept : Node(0) {}
     Node* child[kWidth] = {};

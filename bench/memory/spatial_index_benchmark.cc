@@ -52,7 +52,7 @@ const std::vector<SpatialEntry>& points(std::int64_t n) {
     std::uniform_real_distribution<double> u(0.0, side_of(n));
     p.resize(static_cast<std::size_t>(n));
     for (std::int64_t i = 0; i < n; ++i) {
-      p[static_cast<std::size_t>(i)] = {static_cast<Slot>(i), u(rng), u(rng)};
+      p[static_cast<std::size_t>(i)] = {static_cast<Slot>(i), 0.0f, u(rng), u(rng)};
     }
   }
   return p;

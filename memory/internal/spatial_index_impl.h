@@ -329,9 +329,9 @@ void BasicSpatialIndex<P>::grow_to(double x, double y) {
 }
 
 template <class P>
-void BasicSpatialIndex<P>::insert(Slot slot, double x, double y) {
+void BasicSpatialIndex<P>::insert(Slot slot, double x, double y, float extent) {
   check_point(x, y, "insert");
-  const SpatialEntry entry{slot, x, y};
+  const SpatialEntry entry{slot, extent, x, y};
   if (root_ == nullptr) {
     // The first square: [-16, 16)^2, or larger (by the growth step) until it holds the point.
     Cell cell{-16.0, -16.0, 32.0, 5};
@@ -583,7 +583,7 @@ void BasicSpatialIndex<P>::erase(Slot slot, double x, double y) {
 
 template <class P>
 void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x,
-                                double to_y) {
+                                double to_y, float extent) {
   check_point(to_x, to_y, "move");
   if (root_ == nullptr || !contains(root_cell_, from_x, from_y)) {
     internal::throw_no_entry("move", slot, from_x, from_y);
@@ -618,9 +618,10 @@ void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double 
   if (contains(cell, to_x, to_y)) {
     e[i].x = to_x;  // same leaf: in place
     e[i].y = to_y;
+    e[i].extent = extent;
     return;
   }
-  insert(slot, to_x, to_y);
+  insert(slot, to_x, to_y, extent);
   try {
     erase_existing(slot, from_x, from_y);
   } catch (...) {

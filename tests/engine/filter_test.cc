@@ -1419,7 +1419,21 @@ TEST_P(FilterUnknownAssociationTest, SpatialIndexStaysExactAgainstBruteForce) {
       const memory::LandmarkTree& map = store.map(i);
       const memory::SpatialIndex& index = store.index(i);
       std::vector<memory::SpatialEntry> truth, got;
-      for (const auto [slot, lm] : map) truth.push_back({slot, lm.x, lm.y});
+      for (const auto [slot, lm] : map) {
+        // The extent: the covariance's largest eigenvalue, rounded up to a float (the gate
+        // relies on it never being below; the EKF updates move the mean with the covariance).
+        const double half_gap = 0.5 * (lm.sxx - lm.syy);
+        const double largest =
+            0.5 * (lm.sxx + lm.syy) + std::sqrt(half_gap * half_gap + lm.sxy * lm.sxy);
+        const memory::SpatialEntry* stored = nullptr;
+        index.within(lm.x, lm.y, 0.0, [&](const memory::SpatialEntry& e) {
+          if (e.slot == slot) stored = &e;
+        });
+        ASSERT_NE(stored, nullptr) << "slot " << slot << " of particle " << i;
+        EXPECT_GE(static_cast<double>(stored->extent), largest) << "slot " << slot;
+        EXPECT_LE(static_cast<double>(stored->extent), largest * (1.0 + 1e-6)) << "slot " << slot;
+        truth.push_back({slot, stored->extent, lm.x, lm.y});
+      }
       index.for_each([&](const memory::SpatialEntry& e) { got.push_back(e); });
       auto by_slot = [](const memory::SpatialEntry& a, const memory::SpatialEntry& b) {
         return a.slot < b.slot;

@@ -259,8 +259,9 @@ void random_change(Index& index, Oracle& oracle, Kind kind, Slot& next_slot,
   const unsigned op = static_cast<unsigned>(rng() % 10);
   if (oracle.empty() || op < 3) {
     const auto [x, y] = random_point(kind, rng);
-    index.insert(next_slot, x, y);
-    oracle.push_back({next_slot++, x, y});
+    const auto extent = static_cast<float>(rng() % 1000);  // carried, never read by the index
+    index.insert(next_slot, x, y, extent);
+    oracle.push_back({next_slot++, extent, x, y});
     return;
   }
   const std::size_t i = rng() % oracle.size();
@@ -282,9 +283,11 @@ void random_change(Index& index, Oracle& oracle, Kind kind, Slot& next_slot,
   } else {
     std::tie(x, y) = random_point(kind, rng);
   }
-  index.move(e.slot, e.x, e.y, x, y);
+  const float extent = 0.5f * e.extent;  // an EKF update shrinks the landmark's covariance
+  index.move(e.slot, e.x, e.y, x, y, extent);
   e.x = x;
   e.y = y;
+  e.extent = extent;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -340,7 +343,7 @@ TYPED_TEST(SpatialIndexTest, RandomMapsMatchBruteForce) {
     for (int i = 0; i < n; ++i) {
       const auto [x, y] = random_point(kind, rng);
       index.insert(next, x, y);
-      oracle.push_back({next++, x, y});
+      oracle.push_back({next++, 0.0f, x, y});
     }
     ASSERT_TRUE(same_as_brute_force(index, oracle, rng, sized(120, 30)));
     for (int round = 0; round < 6; ++round) {
@@ -369,7 +372,7 @@ TYPED_TEST(SpatialIndexTest, GridQueriesExactlyOnTheRadius) {
   for (int x = -40; x <= 40; ++x) {
     for (int y = -40; y <= 40; y += 1) {
       index.insert(slot, x, y);
-      oracle.push_back({slot++, static_cast<double>(x), static_cast<double>(y)});
+      oracle.push_back({slot++, 0.0f, static_cast<double>(x), static_cast<double>(y)});
     }
   }
   for (double qx : {0.0, 16.0, -32.0, 7.0, 8.0}) {
@@ -435,7 +438,7 @@ TYPED_TEST(SpatialIndexTest, RootGrowsAndShrinks) {
   for (double scale = 1.0; scale < 1e149; scale *= 37.0) {
     for (const auto& [sx, sy] : {std::pair{1.0, 1.0}, {-1.0, 0.5}, {0.25, -1.0}, {-1.0, -1.0}}) {
       index.insert(slot, sx * scale, sy * scale);
-      oracle.push_back({slot++, sx * scale, sy * scale});
+      oracle.push_back({slot++, 0.0f, sx * scale, sy * scale});
     }
     ASSERT_TRUE(same_as_brute_force(index, oracle, rng, 10)) << scale;
   }
@@ -551,7 +554,7 @@ TYPED_TEST(SpatialIndexTest, StrongGuaranteeOnAllocationFailure) {
       if (variant >= 4) {
         index = Index(failing);  // unshared: in-place changes, splits and merges
         for (const SpatialEntry& e : oracle) {
-          index.insert(e.slot, e.x, e.y);
+          index.insert(e.slot, e.x, e.y, e.extent);
         }
       }
       const SpatialEntry target = oracle[rng() % oracle.size()];
@@ -616,7 +619,7 @@ TEST(SpatialIndexNodes, HundredCopiesTenMovesEach) {
     const double x = u(rng);
     const double y = u(rng);
     base.insert(static_cast<Slot>(i), x, y);
-    oracle.push_back({static_cast<Slot>(i), x, y});
+    oracle.push_back({static_cast<Slot>(i), 0.0f, x, y});
   }
   const std::int64_t base_nodes = heap.stats().live_nodes;
   std::vector<SpatialIndex> handles(100, base);
