@@ -118,7 +118,7 @@ struct PassBlocks {
   PassBlocks(std::size_t particles, unsigned threads, std::size_t grain, bool heavy)
       : m(particles), groups((particles + kMotionLanes - 1) / kMotionLanes) {
     tasks = (particles + grain - 1) / grain;
-    if (heavy) tasks = std::max<std::size_t>(tasks, 4 * std::size_t{threads});
+    if (heavy && threads > 1) tasks = std::max<std::size_t>(tasks, 4 * std::size_t{threads});
     if (threads > 1 && tasks > 1) tasks = (tasks + threads - 1) / threads * threads;
     tasks = std::clamp<std::size_t>(tasks, 1, std::max<std::size_t>(groups, 1));
   }
