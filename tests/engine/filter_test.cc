@@ -270,6 +270,7 @@ TEST(FilterConfigTest, ValidateNamesTheFirstBadField) {
       {"log_new_landmark", [](FilterConfig& c) { c.log_new_landmark = -kInf; }},
       {"existence", [](FilterConfig& c) { c.existence.missed = kNaN; }},
       {"grain", [](FilterConfig& c) { c.grain = 0; }},
+      {"split_seconds", [](FilterConfig& c) { c.split_seconds = kNaN; }},
       {"initial_pose", [](FilterConfig& c) { c.initial_pose[2] = kNaN; }},
       {"fraction", [](FilterConfig& c) { c.resample.ess_fraction = 1.5; }},
   };
@@ -413,11 +414,17 @@ TEST_P(FilterDeterminismTest, BitIdenticalForAnyThreadCountAndGrain) {
   config.grain = 16;
   const RunResult reference = run_scenario(config, s);
   EXPECT_GT(reference.resamples, 10u);
-  const std::pair<unsigned, std::size_t> layouts[] = {{1, 1}, {2, 1}, {2, 3}, {2, 16}, {2, 1000}};
-  for (const auto& [threads, grain] : layouts) {
-    SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain));
+  // split_seconds 0: every pass counts as heavy and is split across the threads whatever the
+  // grain (as Victoria Park's are); infinity: never.
+  const std::tuple<unsigned, std::size_t, double> layouts[] = {
+      {1, 1, kInf}, {2, 1, kInf}, {2, 3, kInf}, {2, 16, kInf}, {2, 1000, kInf}, {2, 1000, 0.0},
+      {1, 1000, 0.0}};
+  for (const auto& [threads, grain, split] : layouts) {
+    SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain) +
+                 ", split_seconds " + std::to_string(split));
     config.threads = threads;
     config.grain = grain;
+    config.split_seconds = split;
     const RunResult r = run_scenario(config, s);
     EXPECT_TRUE(identical(r.particles, reference.particles));
     EXPECT_TRUE(identical(r.estimate, reference.estimate));
