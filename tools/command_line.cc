@@ -134,6 +134,11 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--grain", f.grain, "particles per parallel task")
       ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 30))
       ->capture_default_str();
+  cmd.add_option("--split-seconds", f.split_seconds,
+                 "a pass whose previous one took longer is split across the threads whatever "
+                 "--grain (0: always)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd.add_option("--resample", w.resample, "when to resample: every (scan) or neff")
       ->check(CLI::IsMember({"every", "neff"}))
       ->capture_default_str();

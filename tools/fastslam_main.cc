@@ -102,6 +102,12 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(std::size_t{1}, std::size_t{1'000'000}))
       ->capture_default_str();
   scaling_cmd
+      ->add_option("--split-seconds", scaling.filter.split_seconds,
+                   "a pass whose previous one took longer is split across the threads whatever "
+                   "--grain (0: always)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  scaling_cmd
       ->add_option("--repeats", scaling.repeats,
                    "runs per point; the fastest is reported, all are kept in the JSON")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1000}))

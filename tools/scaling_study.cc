@@ -308,6 +308,7 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
           {"particles", options.particles},
           {"threads", options.threads},
           {"grain", f.grain},
+          {"split_seconds", f.split_seconds},
           {"resample", options.engine == ScalingEngine::kLinear ? std::string("every scan")
                        : f.resample.when == parallel::ResamplePolicy::When::kEveryStep
                            ? std::string("every scan")

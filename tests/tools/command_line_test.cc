@@ -98,6 +98,16 @@ TEST_F(CommandLine, SpacingAndScanPeriodAreSetOnlyWhenGiven) {
   EXPECT_NE(error_of("{}", "--spacing -1").find("--spacing"), std::string::npos);
 }
 
+TEST_F(CommandLine, ThreadsGrainAndSplit) {
+  RunOptions o = run(R"({"split-seconds": 0})", "--threads 2 --grain 16");
+  EXPECT_EQ(o.filter.threads, 2u);
+  EXPECT_EQ(o.filter.grain, 16u);
+  EXPECT_EQ(o.filter.split_seconds, 0.0);
+  o = run("{}", "");
+  EXPECT_EQ(o.filter.split_seconds, engine::FilterConfig{}.split_seconds);
+  EXPECT_NE(error_of("{}", "--split-seconds -1").find("--split-seconds"), std::string::npos);
+}
+
 TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
   std::string e = error_of(R"({"particles": 10, "partcles": 5})");
   EXPECT_NE(e.find(path_ + ": key 'partcles': unknown option"), std::string::npos) << e;
