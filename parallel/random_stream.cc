@@ -232,6 +232,44 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
   }
 }
 
+#if defined(__AVX512F__)
+// Chunks of pair_run on AVX-512 (see there).
+constexpr std::size_t kPairChunk = 32;
+
+// The first block of the streams of particles first + l, l < L (counter {0, first + l, c2,
+// c3}), as the two 64-bit draws a[l] = word 0 | word 1 << 32, b[l] = word 2 | word 3 << 32.
+template <std::size_t L>
+[[gnu::always_inline]] inline void pair_words_avx512(const internal::PhiloxRoundKeys& keys,
+                                                     std::uint64_t c2, std::uint64_t c3,
+                                                     std::uint32_t first, std::uint64_t* a,
+                                                     std::uint64_t* b) noexcept {
+  static_assert(L % 8 == 0);
+  constexpr std::size_t kV = L % 16 == 0 ? 2 : 1;
+  const __m512i low = _mm512_set1_epi64(0xFFFFFFFFu);
+  const __m512i iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
+  for (std::size_t l = 0; l < L; l += 8 * kV) {
+    __m512i x0[kV];
+    __m512i x1[kV];
+    __m512i x2[kV];
+    __m512i x3[kV];
+    for (std::size_t v = 0; v < kV; ++v) {
+      // Counter word 1 wraps modulo 2^32 like the scalar path's; its high half is ignored.
+      x0[v] = _mm512_setzero_si512();
+      x1[v] = _mm512_add_epi64(_mm512_set1_epi64(static_cast<long long>(std::uint64_t{first} + l + 8 * v)), iota);
+      x2[v] = _mm512_set1_epi64(static_cast<long long>(c2));
+      x3[v] = _mm512_set1_epi64(static_cast<long long>(c3));
+    }
+    internal::philox_rounds_avx512<kV>(keys, x0, x1, x2, x3);
+    for (std::size_t v = 0; v < kV; ++v) {
+      _mm512_store_si512(a + l + 8 * v,
+                         _mm512_ternarylogic_epi64(x0[v], low, internal::slli32_512(x1[v]), 0xEA));
+      _mm512_store_si512(b + l + 8 * v,
+                         _mm512_ternarylogic_epi64(x2[v], low, internal::slli32_512(x3[v]), 0xEA));
+    }
+  }
+}
+#endif
+
 // For each step j: the first Box-Muller pair (block 0) of the streams of particles
 // first_particle + k, k < n, to z0[j * stride + k] and z1[j * stride + k]. Philox and the
 // transform are fused in one loop over particles, which the compiler vectorises with the words
@@ -248,6 +286,23 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
     double* out0 = z0 + j * stride;
     double* out1 = z1 + j * stride;
     std::size_t k = 0;
+#if defined(__AVX512F__)
+    // Whole chunks in two passes: the blocks of the chunk by the explicit rounds, two vectors
+    // side by side, to the draws a, b; then the transform over the chunk, vectorised by the
+    // compiler. Fused in one loop (one vector per iteration), both passes form one long
+    // dependency chain per vector (ten multiply rounds, a division, a square root) that the
+    // out-of-order window cannot overlap with the next; separate, the iterations of each pass
+    // are short and independent. Then chunks of 8; a remainder below 8 is scalar.
+    auto chunk = [&]<std::size_t kChunk>(std::size_t at) __attribute__((always_inline)) {
+      alignas(64) std::uint64_t a[kChunk];
+      alignas(64) std::uint64_t b[kChunk];
+      pair_words_avx512<kChunk>(keys, c2, c3, first_particle + static_cast<std::uint32_t>(at), a,
+                                b);
+      for (std::size_t l = 0; l < kChunk; ++l) box_muller(a[l], b[l], out0[at + l], out1[at + l]);
+    };
+    for (; k + kPairChunk <= n; k += kPairChunk) chunk.template operator()<kPairChunk>(k);
+    for (; k + 8 <= n; k += 8) chunk.template operator()<8>(k);
+#else
     if constexpr (internal::kPhiloxSimdLanes > 0) {
       // Whole chunks: the words by the explicit SIMD rounds, then the transform over the chunk
       // (vectorised by the compiler); the same values as the fused loop below. Chunks of 16,
@@ -274,6 +329,7 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
         for (; k + 8 <= n; k += 8) chunk.template operator()<8>(k);
       }
     }
+#endif
     for (; k < n; ++k) {
       std::uint64_t x0 = 0;
       std::uint64_t x1 = (first_particle + k) & 0xFFFFFFFFu;
