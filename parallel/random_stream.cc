@@ -238,14 +238,42 @@ constexpr std::size_t kPairChunk = 32;
 
 // The first block of the streams of particles first + l, l < L (counter {0, first + l, c2,
 // c3}), as the two 64-bit draws a[l] = word 0 | word 1 << 32, b[l] = word 2 | word 3 << 32.
+// Only counter word 1 varies across lanes, so the first three rounds are partly the same in every
+// lane: word 0 starts at 0 (round 0's first product is 0), and of the words each round
+// multiplies, one depends on the lane in round 1 and in round 2 and none in round 0. Those parts
+// are computed once, in scalar code, the same products as philox4x32_10 (the test compares).
 template <std::size_t L>
 [[gnu::always_inline]] inline void pair_words_avx512(const internal::PhiloxRoundKeys& keys,
                                                      std::uint64_t c2, std::uint64_t c3,
                                                      std::uint32_t first, std::uint64_t* a,
                                                      std::uint64_t* b) noexcept {
   static_assert(L % 8 == 0);
+  using internal::kPhiloxM0;
+  using internal::kPhiloxM1;
   constexpr std::size_t kV = L % 16 == 0 ? 2 : 1;
-  const __m512i low = _mm512_set1_epi64(0xFFFFFFFFu);
+  constexpr std::uint64_t kLow = 0xFFFFFFFFu;
+  const auto splat = [](std::uint64_t v) { return _mm512_set1_epi64(static_cast<long long>(v)); };
+  // Round 0 on {0, w1, c2, c3}: {hi(M1 c2) ^ w1 ^ k0, lo(M1 c2), c3 ^ k1, 0}.
+  const std::uint64_t r0p1 = kPhiloxM1 * c2;
+  const std::uint64_t r0x0 = (r0p1 >> 32) ^ keys.k0[0];  // ^ w1 per lane
+  const std::uint64_t r0x1 = r0p1 & kLow;
+  const std::uint64_t r0x2 = c3 ^ keys.k1[0];
+  // Round 1 on {x0 (lane), r0x1, r0x2, 0}: {hi(M1 r0x2) ^ r0x1 ^ k0, lo(M1 r0x2),
+  // hi(M0 x0) ^ k1, lo(M0 x0)}.
+  const std::uint64_t r1p1 = kPhiloxM1 * r0x2;
+  const std::uint64_t r1x0 = (r1p1 >> 32) ^ r0x1 ^ keys.k0[1];
+  const std::uint64_t r1x1 = r1p1 & kLow;
+  // Round 2 on {r1x0, r1x1, x2 (lane), x3 (lane)}: {hi(M1 x2) ^ r1x1 ^ k0, lo(M1 x2),
+  // hi(M0 r1x0) ^ x3 ^ k1, lo(M0 r1x0)}.
+  const std::uint64_t r2p0 = kPhiloxM0 * r1x0;
+  const __m512i m0 = splat(kPhiloxM0);
+  const __m512i m1 = splat(kPhiloxM1);
+  const __m512i k1_1 = splat(keys.k1[1]);
+  const __m512i r0x0_v = splat(r0x0);
+  const __m512i r1x1_k = splat(r1x1 ^ keys.k0[2]);
+  const __m512i r2p0_k = splat((r2p0 >> 32) ^ keys.k1[2]);
+  const __m512i r2x3 = splat(r2p0 & kLow);
+  const __m512i low = splat(kLow);
   const __m512i iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
   for (std::size_t l = 0; l < L; l += 8 * kV) {
     __m512i x0[kV];
@@ -253,13 +281,17 @@ template <std::size_t L>
     __m512i x2[kV];
     __m512i x3[kV];
     for (std::size_t v = 0; v < kV; ++v) {
-      // Counter word 1 wraps modulo 2^32 like the scalar path's; its high half is ignored.
-      x0[v] = _mm512_setzero_si512();
-      x1[v] = _mm512_add_epi64(_mm512_set1_epi64(static_cast<long long>(std::uint64_t{first} + l + 8 * v)), iota);
-      x2[v] = _mm512_set1_epi64(static_cast<long long>(c2));
-      x3[v] = _mm512_set1_epi64(static_cast<long long>(c3));
+      // Counter word 1 wraps modulo 2^32 like the scalar path's: high halves are ignored.
+      const __m512i w1 = _mm512_add_epi64(splat(std::uint64_t{first} + l + 8 * v), iota);
+      const __m512i p0 = internal::mul_epu32_512(m0, _mm512_xor_si512(w1, r0x0_v));  // round 1
+      const __m512i y2 = _mm512_xor_si512(internal::srli32_512(p0), k1_1);
+      const __m512i p1 = internal::mul_epu32_512(m1, y2);  // round 2
+      x0[v] = _mm512_xor_si512(internal::srli32_512(p1), r1x1_k);
+      x1[v] = p1;
+      x2[v] = _mm512_xor_si512(p0, r2p0_k);
+      x3[v] = r2x3;
     }
-    internal::philox_rounds_avx512<kV>(keys, x0, x1, x2, x3);
+    internal::philox_rounds_avx512<kV, 3>(keys, x0, x1, x2, x3);
     for (std::size_t v = 0; v < kV; ++v) {
       _mm512_store_si512(a + l + 8 * v,
                          _mm512_ternarylogic_epi64(x0[v], low, internal::slli32_512(x1[v]), 0xEA));

@@ -104,16 +104,16 @@ inline constexpr std::size_t kPhiloxSimdStep = kPhiloxSimdLanes > 0 ? kPhiloxSim
   return _mm512_maskz_slli_epi64(0xFF, a, 32);
 }
 
-// `V` vectors of 8 lanes through the ten rounds, in registers (see above: the words' high
-// halves are garbage on exit).
-template <std::size_t V>
+// `V` vectors of 8 lanes through rounds kFirstRound .. 9 (all ten by default), in registers
+// (see above: the words' high halves are garbage on exit).
+template <std::size_t V, int kFirstRound = 0>
 [[gnu::always_inline]] inline void philox_rounds_avx512(const PhiloxRoundKeys& keys, __m512i* a0,
                                                         __m512i* a1, __m512i* a2,
                                                         __m512i* a3) noexcept {
   const __m512i m0 = _mm512_set1_epi64(kPhiloxM0);
   const __m512i m1 = _mm512_set1_epi64(kPhiloxM1);
 #pragma GCC unroll 10
-  for (int round = 0; round < kPhiloxRounds; ++round) {
+  for (int round = kFirstRound; round < kPhiloxRounds; ++round) {
     const __m512i k0 = _mm512_set1_epi64(static_cast<long long>(keys.k0[round]));
     const __m512i k1 = _mm512_set1_epi64(static_cast<long long>(keys.k1[round]));
 #pragma GCC unroll 4
