@@ -303,9 +303,10 @@ template <std::size_t L>
 #endif
 
 // For each step j: the first Box-Muller pair (block 0) of the streams of particles
-// first_particle + k, k < n, to z0[j * stride + k] and z1[j * stride + k]. Philox and the
-// transform are fused in one loop over particles, which the compiler vectorises with the words
-// kept in registers; the constants are set up once for all steps.
+// first_particle + k, k < n, to z0[j * stride + k] and z1[j * stride + k]. With AVX-512 or
+// AVX2, chunks of lanes by the explicit SIMD rounds and then the transform; otherwise (and for a
+// remainder below 8) Philox and the transform fused in one loop over particles. The round keys
+// are set up once for all steps.
 [[gnu::noinline]] void pair_run(std::uint64_t seed, std::span<const std::uint64_t> steps,
                                 Purpose purpose, std::uint32_t first_particle, std::size_t n,
                                 double* z0, double* z1, std::size_t stride) noexcept {
