@@ -254,7 +254,7 @@ template <std::size_t L>
   static_assert(L % 8 == 0);
   using internal::kPhiloxM0;
   using internal::kPhiloxM1;
-  constexpr std::size_t kV = L % 16 == 0 ? 2 : 1;
+  constexpr std::size_t kV = L % 32 == 0 ? 4 : L % 16 == 0 ? 2 : 1;
   constexpr std::uint64_t kLow = 0xFFFFFFFFu;
   const auto splat = [](std::uint64_t v) { return _mm512_set1_epi64(static_cast<long long>(v)); };
   // Round 0 on {0, w1, c2, c3}: {hi(M1 c2) ^ w1 ^ k0, lo(M1 c2), c3 ^ k1, 0}.
@@ -324,7 +324,7 @@ template <std::size_t L>
     double* out1 = z1 + j * stride;
     std::size_t k = 0;
 #if defined(__AVX512F__)
-    // Whole chunks in two passes: the blocks of the chunk by the explicit rounds, two vectors
+    // Whole chunks in two passes: the blocks of the chunk by the explicit rounds, four vectors
     // side by side, to the draws a, b; then the transform over the chunk, vectorised by the
     // compiler. Fused in one loop (one vector per iteration), both passes form one long
     // dependency chain per vector (ten multiply rounds, a division, a square root) that the
