@@ -65,9 +65,8 @@ using internal::sincos_turns;
                                               double& z1) noexcept {
   // u = ((a >> 11) + 1) 2^-53 in (0, 1], a normal number: the scaling is exact, so it is done
   // on the exponent bits (an integer subtraction, off the multiply pipes), the same bits.
-  const double u =
-      std::bit_cast<double>(std::bit_cast<std::uint64_t>(exact_double((a >> 11) + 1)) -
-                            (std::uint64_t{53} << 52));
+  const double u = std::bit_cast<double>(std::bit_cast<std::uint64_t>(exact_double((a >> 11) + 1)) -
+                                         (std::uint64_t{53} << 52));
   const double radius = std::sqrt(-2.0 * log_positive(u));
   double c = 0.0;
   double s = 0.0;

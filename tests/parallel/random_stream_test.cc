@@ -134,8 +134,8 @@ TEST(Philox4x32x10, LanesMatchScalar) {
 // the scalar block, every counter word varied, extreme words included.
 template <std::size_t kL>
 void expect_simd_rounds_match_scalar() {
-  for (std::uint32_t salt : {0u, 1u, 0x80000000u, 0xdeadbeefu, 0xffffffffu, 0x12345678u,
-                             0x7fffffffu, 0xfffffffeu}) {
+  for (std::uint32_t salt :
+       {0u, 1u, 0x80000000u, 0xdeadbeefu, 0xffffffffu, 0x12345678u, 0x7fffffffu, 0xfffffffeu}) {
     const PhiloxKey key{salt * 7u + 3u, ~salt};
     const internal::PhiloxRoundKeys keys = internal::philox_round_keys(key);
     std::uint64_t x[4][kL];
@@ -424,7 +424,8 @@ TEST(RandomStream, NormalPairsEqualScalarReferenceOverManyLanesAndKeys) {
   const std::array<std::uint64_t, 4> steps = {0, 0xFFFFFFFFu, (std::uint64_t{0xFFFFFF} << 32) | 7,
                                               123456789};
   for (const std::uint64_t seed : {std::uint64_t{0}, ~std::uint64_t{0}, 0x0123456789abcdefu}) {
-    const PhiloxKey key = {static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32)};
+    const PhiloxKey key = {static_cast<std::uint32_t>(seed),
+                           static_cast<std::uint32_t>(seed >> 32)};
     for (const std::uint32_t first : {0u, 5u, 0xFFFFFFFFu - 90u}) {
       for (std::size_t count = 1; count <= 80; ++count) {
         if (std::uint64_t{first} + count > (std::uint64_t{1} << 32)) continue;
@@ -444,9 +445,8 @@ TEST(RandomStream, NormalPairsEqualScalarReferenceOverManyLanesAndKeys) {
             }
             const PhiloxCounter w =
                 philox4x32_10({0, static_cast<std::uint32_t>(first + k), c2, c3}, key);
-            const std::array<double, 2> want =
-                normal_pair_from_bits(w[0] | std::uint64_t{w[1]} << 32,
-                                      w[2] | std::uint64_t{w[3]} << 32);
+            const std::array<double, 2> want = normal_pair_from_bits(
+                w[0] | std::uint64_t{w[1]} << 32, w[2] | std::uint64_t{w[3]} << 32);
             ASSERT_EQ(std::bit_cast<std::uint64_t>(z0[j * stride + k]),
                       std::bit_cast<std::uint64_t>(want[0]))
                 << "seed " << seed << " first " << first << " count " << count << " step "
