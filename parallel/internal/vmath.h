@@ -70,16 +70,10 @@ namespace fastslam::parallel::internal {
   // conversion, and without them GCC does not vectorise a loop that calls this. The sign
   // extension is (u ^ 2^11) - 2^11; adding k to the bits of 1.5 * 2^52 adds it to the integer
   // that double holds (|k| < 2^11), so the subtraction gives k exactly.
-  // With AVX-512 (vpsraq, and vcvtqq2pd from DQ) the direct form is fewer instructions; both
-  // give k exactly.
-#if defined(__AVX512F__) && defined(__AVX512DQ__)
-  const double dk = static_cast<double>(static_cast<std::int64_t>(tmp) >> 52);
-#else
   constexpr std::uint64_t kMagicBits = 0x4338000000000000u;  // bits of 0x1.8p52
   const std::uint64_t u = tmp >> 52;
   const std::uint64_t k = (u ^ 0x800u) - 0x800u;  // two's complement of the signed 12-bit k
   const double dk = std::bit_cast<double>(kMagicBits + k) - 0x1.8p52;
-#endif
   const double f = m - 1.0;  // exact (Sterbenz)
   const double s = f / (2.0 + f);
   const double z = s * s;
