@@ -83,7 +83,7 @@ constexpr PhiloxRoundKeys philox_round_keys(PhiloxKey key) noexcept {
 // high halves then carry garbage too) and vpmuludq, which ignores high halves; the stores mask
 // once. It runs two 8-lane vectors side by side (two independent dependency chains). On the
 // webmap FS1 filter (M = 100, one thread) the AVX-512 forms here and in random_stream.cc's
-// pair_run took the loop from 22.0 to about 20.9 ms of CPU (filter_benchmark, medians).
+// pair_run took the loop from 22.2 to 20.7 ms of CPU (filter_benchmark, medians).
 // kPhiloxSimdLanes is the vector width in lanes, 0 where unused.
 #if defined(__AVX512F__)
 inline constexpr std::size_t kPhiloxSimdLanes = 8;
