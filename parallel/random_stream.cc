@@ -63,7 +63,10 @@ using internal::sincos_turns;
 // Box-Muller on two 64-bit draws (see the header).
 [[gnu::always_inline]] inline void box_muller(std::uint64_t a, std::uint64_t b, double& z0,
                                               double& z1) noexcept {
-  const double u = exact_double((a >> 11) + 1) * 0x1p-53;
+  // u = ((a >> 11) + 1) 2^-53 in (0, 1], a normal number: the scaling is exact, so it is done
+  // on the exponent bits (an integer subtraction, off the multiply pipes), the same bits.
+  const double u = std::bit_cast<double>(std::bit_cast<std::uint64_t>(exact_double((a >> 11) + 1)) -
+                                         (std::uint64_t{53} << 52));
   const double radius = std::sqrt(-2.0 * log_positive(u));
   double c = 0.0;
   double s = 0.0;
@@ -232,10 +235,81 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
   }
 }
 
+#if defined(__AVX512F__)
+// Chunks of pair_run on AVX-512 (see there).
+constexpr std::size_t kPairChunk = 32;
+
+// The first block of the streams of particles first + l, l < L (counter {0, first + l, c2,
+// c3}), as the two 64-bit draws a[l] = word 0 | word 1 << 32, b[l] = word 2 | word 3 << 32.
+// Only counter word 1 varies across lanes, so the first three rounds are partly the same in every
+// lane: word 0 starts at 0 (round 0's first product is 0), and of the words each round
+// multiplies, one depends on the lane in round 1 and in round 2 and none in round 0. Those parts
+// are computed once, in scalar code, the same products as philox4x32_10 (the test compares).
+template <std::size_t L>
+[[gnu::always_inline]] inline void pair_words_avx512(const internal::PhiloxRoundKeys& keys,
+                                                     std::uint64_t c2, std::uint64_t c3,
+                                                     std::uint32_t first, std::uint64_t* a,
+                                                     std::uint64_t* b) noexcept {
+  static_assert(L % 8 == 0);
+  using internal::kPhiloxM0;
+  using internal::kPhiloxM1;
+  constexpr std::size_t kV = L % 32 == 0 ? 4 : L % 16 == 0 ? 2 : 1;
+  constexpr std::uint64_t kLow = 0xFFFFFFFFu;
+  const auto splat = [](std::uint64_t v) { return _mm512_set1_epi64(static_cast<long long>(v)); };
+  // Round 0 on {0, w1, c2, c3}: {hi(M1 c2) ^ w1 ^ k0, lo(M1 c2), c3 ^ k1, 0}.
+  const std::uint64_t r0p1 = kPhiloxM1 * c2;
+  const std::uint64_t r0x0 = (r0p1 >> 32) ^ keys.k0[0];  // ^ w1 per lane
+  const std::uint64_t r0x1 = r0p1 & kLow;
+  const std::uint64_t r0x2 = c3 ^ keys.k1[0];
+  // Round 1 on {x0 (lane), r0x1, r0x2, 0}: {hi(M1 r0x2) ^ r0x1 ^ k0, lo(M1 r0x2),
+  // hi(M0 x0) ^ k1, lo(M0 x0)}.
+  const std::uint64_t r1p1 = kPhiloxM1 * r0x2;
+  const std::uint64_t r1x0 = (r1p1 >> 32) ^ r0x1 ^ keys.k0[1];
+  const std::uint64_t r1x1 = r1p1 & kLow;
+  // Round 2 on {r1x0, r1x1, x2 (lane), x3 (lane)}: {hi(M1 x2) ^ r1x1 ^ k0, lo(M1 x2),
+  // hi(M0 r1x0) ^ x3 ^ k1, lo(M0 r1x0)}.
+  const std::uint64_t r2p0 = kPhiloxM0 * r1x0;
+  const __m512i m0 = splat(kPhiloxM0);
+  const __m512i m1 = splat(kPhiloxM1);
+  const __m512i k1_1 = splat(keys.k1[1]);
+  const __m512i r0x0_v = splat(r0x0);
+  const __m512i r1x1_k = splat(r1x1 ^ keys.k0[2]);
+  const __m512i r2p0_k = splat((r2p0 >> 32) ^ keys.k1[2]);
+  const __m512i r2x3 = splat(r2p0 & kLow);
+  const __m512i low = splat(kLow);
+  const __m512i iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
+  for (std::size_t l = 0; l < L; l += 8 * kV) {
+    __m512i x0[kV];
+    __m512i x1[kV];
+    __m512i x2[kV];
+    __m512i x3[kV];
+    for (std::size_t v = 0; v < kV; ++v) {
+      // Counter word 1 wraps modulo 2^32 like the scalar path's: high halves are ignored.
+      const __m512i w1 = _mm512_add_epi64(splat(std::uint64_t{first} + l + 8 * v), iota);
+      const __m512i p0 = internal::mul_epu32_512(m0, _mm512_xor_si512(w1, r0x0_v));  // round 1
+      const __m512i y2 = _mm512_xor_si512(internal::srli32_512(p0), k1_1);
+      const __m512i p1 = internal::mul_epu32_512(m1, y2);  // round 2
+      x0[v] = _mm512_xor_si512(internal::srli32_512(p1), r1x1_k);
+      x1[v] = p1;
+      x2[v] = _mm512_xor_si512(p0, r2p0_k);
+      x3[v] = r2x3;
+    }
+    internal::philox_rounds_avx512<kV, 3>(keys, x0, x1, x2, x3);
+    for (std::size_t v = 0; v < kV; ++v) {
+      _mm512_store_si512(a + l + 8 * v,
+                         _mm512_ternarylogic_epi64(x0[v], low, internal::slli32_512(x1[v]), 0xEA));
+      _mm512_store_si512(b + l + 8 * v,
+                         _mm512_ternarylogic_epi64(x2[v], low, internal::slli32_512(x3[v]), 0xEA));
+    }
+  }
+}
+#endif
+
 // For each step j: the first Box-Muller pair (block 0) of the streams of particles
-// first_particle + k, k < n, to z0[j * stride + k] and z1[j * stride + k]. Philox and the
-// transform are fused in one loop over particles, which the compiler vectorises with the words
-// kept in registers; the constants are set up once for all steps.
+// first_particle + k, k < n, to z0[j * stride + k] and z1[j * stride + k]. With AVX-512 or
+// AVX2, chunks of lanes by the explicit SIMD rounds and then the transform; otherwise (and for a
+// remainder below 8) Philox and the transform fused in one loop over particles. The round keys
+// are set up once for all steps.
 [[gnu::noinline]] void pair_run(std::uint64_t seed, std::span<const std::uint64_t> steps,
                                 Purpose purpose, std::uint32_t first_particle, std::size_t n,
                                 double* z0, double* z1, std::size_t stride) noexcept {
@@ -248,6 +322,23 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
     double* out0 = z0 + j * stride;
     double* out1 = z1 + j * stride;
     std::size_t k = 0;
+#if defined(__AVX512F__)
+    // Whole chunks in two passes: the blocks of the chunk by the explicit rounds, four vectors
+    // side by side, to the draws a, b; then the transform over the chunk, vectorised by the
+    // compiler. Fused in one loop (one vector per iteration), both passes form one long
+    // dependency chain per vector (ten multiply rounds, a division, a square root) that the
+    // out-of-order window cannot overlap with the next; separate, the iterations of each pass
+    // are short and independent. Then chunks of 8; a remainder below 8 is scalar.
+    auto chunk = [&]<std::size_t kChunk>(std::size_t at) __attribute__((always_inline)) {
+      alignas(64) std::uint64_t a[kChunk];
+      alignas(64) std::uint64_t b[kChunk];
+      pair_words_avx512<kChunk>(keys, c2, c3, first_particle + static_cast<std::uint32_t>(at), a,
+                                b);
+      for (std::size_t l = 0; l < kChunk; ++l) box_muller(a[l], b[l], out0[at + l], out1[at + l]);
+    };
+    for (; k + kPairChunk <= n; k += kPairChunk) chunk.template operator()<kPairChunk>(k);
+    for (; k + 8 <= n; k += 8) chunk.template operator()<8>(k);
+#else
     if constexpr (internal::kPhiloxSimdLanes > 0) {
       // Whole chunks: the words by the explicit SIMD rounds, then the transform over the chunk
       // (vectorised by the compiler); the same values as the fused loop below. Chunks of 16,
@@ -274,6 +365,7 @@ void particle_blocks(const KeyWords& kw, std::uint32_t first_particle, std::size
         for (; k + 8 <= n; k += 8) chunk.template operator()<8>(k);
       }
     }
+#endif
     for (; k < n; ++k) {
       std::uint64_t x0 = 0;
       std::uint64_t x1 = (first_particle + k) & 0xFFFFFFFFu;

@@ -14,18 +14,19 @@
 //   - `philox4x32_10_words`: one block on four 64-bit words with precomputed round keys, inline,
 //     for the body of a caller's own loop over blocks (the loop vectorises with whatever the
 //     caller does to the output, e.g. Box-Muller, and the words never leave registers).
-//   - `philox4x32_10_simd<L>`: L blocks in place with explicit AVX2 32x32->64 multiplies
-//     (vpmuludq), for AVX2 builds, where the compiler keeps the plain loops scalar (see there);
+//   - `philox4x32_10_simd<L>`: L blocks in place with explicit 32x32->64 multiplies (vpmuludq),
+//     AVX-512 (`philox_rounds_avx512`, two 8-lane vectors side by side) or AVX2 (see there);
 //     `philox4x32_10_lanes` and the batch normals of random_stream.cc use it when available.
-// Thread safety: pure functions. Costs: no allocation; about 2 ns per block for the lane form
-// at 16 lanes with AVX-512 (see random_stream_benchmark).
+// Thread safety: pure functions. Costs: no allocation; with AVX-512 about 2.1 ns per block at 16
+// lanes including the conversion to two uniforms and the stores (fill_uniform: 950 M uniforms/s,
+// against 860 M/s for the auto-vectorised vpmullq loops; see random_stream_benchmark).
 #pragma once
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
 
-#if defined(__AVX2__) && !defined(__AVX512F__)
+#if defined(__AVX2__)
 #include <immintrin.h>
 #endif
 
@@ -71,27 +72,106 @@ constexpr PhiloxRoundKeys philox_round_keys(PhiloxKey key) noexcept {
   return keys;
 }
 
-// Explicit SIMD rounds for AVX2 builds without AVX-512 (x86-64-v3). A round multiplies 32-bit
-// words held in 64-bit lanes; written in plain C++ that is a 64 x 64-bit product, which AVX2 has
-// no instruction for: its emulation costs three vpmuludq, so GCC 12 keeps those loops scalar.
-// vpmuludq (_mm256_mul_epu32) multiplies exactly the low 32 bits of each lane, so the words are
-// the portable code's (tests/parallel/random_stream_test.cc compares them). AVX-512 builds have
-// vpmullq and vectorise the portable loops themselves, fused with the caller's transform, which
-// measured faster there than this form (webmap FS1 M = 100: 23.1 ms against 25.4 ms of CPU), so
-// they do not use it. kPhiloxSimdLanes is the vector width in lanes, 0 where unused.
-#if defined(__AVX2__) && !defined(__AVX512F__)
+// Explicit SIMD rounds. A round multiplies 32-bit words; written in plain C++ on words held in
+// 64-bit lanes that is a 64 x 64-bit product, which AVX2 has no instruction for (its emulation
+// costs three vpmuludq, so GCC 12 keeps those loops scalar) and which AVX-512DQ does with
+// vpmullq, a slower instruction than needed. vpmuludq (_mm256/_mm512_mul_epu32) multiplies
+// exactly the low 32 bits of each 64-bit lane, which is the round's 32x32->64 product, so the
+// words are the portable code's (tests/parallel/random_stream_test.cc compares them).
+// AVX-512 does not mask the words between rounds: a product's high half is garbage above the
+// low 32 bits of x1 and x3, which only ever meet xors (into the low halves of x0 and x2, whose
+// high halves then carry garbage too) and vpmuludq, which ignores high halves; the stores mask
+// once. It runs two 8-lane vectors side by side (two independent dependency chains). On the
+// webmap FS1 filter (M = 100, one thread) the AVX-512 forms here and in random_stream.cc's
+// pair_run took the loop from 22.2 to 20.7 ms of CPU (filter_benchmark, medians).
+// kPhiloxSimdLanes is the vector width in lanes, 0 where unused.
+#if defined(__AVX512F__)
+inline constexpr std::size_t kPhiloxSimdLanes = 8;
+#elif defined(__AVX2__)
 inline constexpr std::size_t kPhiloxSimdLanes = 4;
 #else
 inline constexpr std::size_t kPhiloxSimdLanes = 0;
 #endif
 inline constexpr std::size_t kPhiloxSimdStep = kPhiloxSimdLanes > 0 ? kPhiloxSimdLanes : 1;
 
+#if defined(__AVX512F__)
+// vpmuludq, vpsrlq, vpsllq in their zero-masking forms with every lane selected (the same
+// instructions): GCC 12 reports a false -Wmaybe-uninitialized inside the unmasked intrinsics.
+[[gnu::always_inline]] inline __m512i mul_epu32_512(__m512i a, __m512i b) noexcept {
+  return _mm512_maskz_mul_epu32(0xFF, a, b);
+}
+[[gnu::always_inline]] inline __m512i srli32_512(__m512i a) noexcept {
+  return _mm512_maskz_srli_epi64(0xFF, a, 32);
+}
+[[gnu::always_inline]] inline __m512i slli32_512(__m512i a) noexcept {
+  return _mm512_maskz_slli_epi64(0xFF, a, 32);
+}
+
+// `V` vectors of 8 lanes through rounds kFirstRound .. 9 (all ten by default), in registers
+// (see above: the words' high halves are garbage on exit).
+template <std::size_t V, int kFirstRound = 0>
+[[gnu::always_inline]] inline void philox_rounds_avx512(const PhiloxRoundKeys& keys, __m512i* a0,
+                                                        __m512i* a1, __m512i* a2,
+                                                        __m512i* a3) noexcept {
+  const __m512i m0 = _mm512_set1_epi64(kPhiloxM0);
+  const __m512i m1 = _mm512_set1_epi64(kPhiloxM1);
+#pragma GCC unroll 10
+  for (int round = kFirstRound; round < kPhiloxRounds; ++round) {
+    const __m512i k0 = _mm512_set1_epi64(static_cast<long long>(keys.k0[round]));
+    const __m512i k1 = _mm512_set1_epi64(static_cast<long long>(keys.k1[round]));
+#pragma GCC unroll 4
+    for (std::size_t v = 0; v < V; ++v) {
+      const __m512i p0 = mul_epu32_512(m0, a0[v]);
+      const __m512i p1 = mul_epu32_512(m1, a2[v]);
+      const __m512i n0 = _mm512_ternarylogic_epi64(srli32_512(p1), a1[v], k0, 0x96);  // xor
+      const __m512i n2 = _mm512_ternarylogic_epi64(srli32_512(p0), a3[v], k1, 0x96);
+      a1[v] = p1;
+      a3[v] = p0;
+      a0[v] = n0;
+      a2[v] = n2;
+    }
+  }
+}
+#endif
+
 template <std::size_t L>
 [[gnu::always_inline]] inline void philox4x32_10_simd(const PhiloxRoundKeys& keys,
                                                       std::uint64_t* x0, std::uint64_t* x1,
                                                       std::uint64_t* x2,
                                                       std::uint64_t* x3) noexcept {
-#if defined(__AVX2__) && !defined(__AVX512F__)
+#if defined(__AVX512F__)
+  static_assert(L % kPhiloxSimdLanes == 0);
+  const auto load = [](const std::uint64_t* p) { return _mm512_loadu_si512(p); };
+  const auto store = [](std::uint64_t* p, __m512i v) {
+    _mm512_storeu_si512(p, _mm512_and_si512(v, _mm512_set1_epi64(0xFFFFFFFFu)));
+  };
+  constexpr std::size_t kPair = 2 * kPhiloxSimdLanes;
+  std::size_t l = 0;
+  for (; l + kPair <= L; l += kPair) {
+    __m512i a0[2] = {load(x0 + l), load(x0 + l + 8)};
+    __m512i a1[2] = {load(x1 + l), load(x1 + l + 8)};
+    __m512i a2[2] = {load(x2 + l), load(x2 + l + 8)};
+    __m512i a3[2] = {load(x3 + l), load(x3 + l + 8)};
+    philox_rounds_avx512<2>(keys, a0, a1, a2, a3);
+    for (std::size_t v = 0; v < 2; ++v) {
+      store(x0 + l + 8 * v, a0[v]);
+      store(x1 + l + 8 * v, a1[v]);
+      store(x2 + l + 8 * v, a2[v]);
+      store(x3 + l + 8 * v, a3[v]);
+    }
+  }
+  if constexpr (L % kPair != 0) {
+    __m512i a0[1] = {load(x0 + l)};
+    __m512i a1[1] = {load(x1 + l)};
+    __m512i a2[1] = {load(x2 + l)};
+    __m512i a3[1] = {load(x3 + l)};
+    philox_rounds_avx512<1>(keys, a0, a1, a2, a3);
+    store(x0 + l, a0[0]);
+    store(x1 + l, a1[0]);
+    store(x2 + l, a2[0]);
+    store(x3 + l, a3[0]);
+  }
+#elif defined(__AVX2__)
   static_assert(L % kPhiloxSimdLanes == 0);
   using V = __m256i;
   const auto load = [](const std::uint64_t* p) {

@@ -130,11 +130,12 @@ TEST(Philox4x32x10, LanesMatchScalar) {
   }
 }
 
-// The explicit SIMD rounds (AVX2 builds; the portable fallback elsewhere) against the scalar
-// block, every counter word varied, extreme words included.
-TEST(Philox4x32x10, SimdRoundsMatchScalar) {
-  constexpr std::size_t kL = 16;
-  for (std::uint32_t salt : {0u, 1u, 0x80000000u, 0xdeadbeefu, 0xffffffffu}) {
+// The explicit SIMD rounds (AVX-512 and AVX2 builds; the portable fallback elsewhere) against
+// the scalar block, every counter word varied, extreme words included.
+template <std::size_t kL>
+void expect_simd_rounds_match_scalar() {
+  for (std::uint32_t salt :
+       {0u, 1u, 0x80000000u, 0xdeadbeefu, 0xffffffffu, 0x12345678u, 0x7fffffffu, 0xfffffffeu}) {
     const PhiloxKey key{salt * 7u + 3u, ~salt};
     const internal::PhiloxRoundKeys keys = internal::philox_round_keys(key);
     std::uint64_t x[4][kL];
@@ -151,6 +152,14 @@ TEST(Philox4x32x10, SimdRoundsMatchScalar) {
       for (int w = 0; w < 4; ++w) EXPECT_EQ(x[w][l], want[w]) << "salt " << salt << " lane " << l;
     }
   }
+}
+
+// The explicit SIMD rounds at several widths (AVX-512: pairs of vectors and a single one).
+TEST(Philox4x32x10, SimdRoundsMatchScalar) {
+  expect_simd_rounds_match_scalar<16>();
+  expect_simd_rounds_match_scalar<8>();  // widths are multiples of every kPhiloxSimdStep
+  expect_simd_rounds_match_scalar<24>();
+  expect_simd_rounds_match_scalar<32>();
   std::cout << "SIMD lanes in this build: " << internal::kPhiloxSimdLanes << "\n";
 }
 
@@ -405,6 +414,52 @@ TEST(RandomStream, NormalPairsEqualScalarStreamsForAnyBlocking) {
     }
   }
   normal_pairs_for_particles(seed, step, Purpose::kMotion, 0, 0, {}, {});  // empty batch
+}
+
+// normal_pairs_for_particles over several steps == Box-Muller on the scalar reference block
+// (philox4x32_10 of counter {0, particle, step low, purpose | step high}), for every count up to
+// 80 (whole SIMD chunks of 32 and 8 lanes and every remainder), keys and steps with extreme
+// words, first particles next to 2^32 (counter word 1 wraps) and a stride past the count.
+TEST(RandomStream, NormalPairsEqualScalarReferenceOverManyLanesAndKeys) {
+  const std::array<std::uint64_t, 4> steps = {0, 0xFFFFFFFFu, (std::uint64_t{0xFFFFFF} << 32) | 7,
+                                              123456789};
+  for (const std::uint64_t seed : {std::uint64_t{0}, ~std::uint64_t{0}, 0x0123456789abcdefu}) {
+    const PhiloxKey key = {static_cast<std::uint32_t>(seed),
+                           static_cast<std::uint32_t>(seed >> 32)};
+    for (const std::uint32_t first : {0u, 5u, 0xFFFFFFFFu - 90u}) {
+      for (std::size_t count = 1; count <= 80; ++count) {
+        if (std::uint64_t{first} + count > (std::uint64_t{1} << 32)) continue;
+        const std::size_t stride = count + 3;
+        std::vector<double> z0(steps.size() * stride, -7.0);
+        std::vector<double> z1(steps.size() * stride, -7.0);
+        normal_pairs_for_particles(seed, steps, Purpose::kMotion, first, count, z0, z1, stride);
+        for (std::size_t j = 0; j < steps.size(); ++j) {
+          const auto c2 = static_cast<std::uint32_t>(steps[j]);
+          const auto c3 = (static_cast<std::uint32_t>(Purpose::kMotion) << 24) |
+                          static_cast<std::uint32_t>(steps[j] >> 32);
+          for (std::size_t k = 0; k < stride; ++k) {
+            if (k >= count) {  // past the count: untouched
+              ASSERT_EQ(z0[j * stride + k], -7.0);
+              ASSERT_EQ(z1[j * stride + k], -7.0);
+              continue;
+            }
+            const PhiloxCounter w =
+                philox4x32_10({0, static_cast<std::uint32_t>(first + k), c2, c3}, key);
+            const std::array<double, 2> want = normal_pair_from_bits(
+                w[0] | std::uint64_t{w[1]} << 32, w[2] | std::uint64_t{w[3]} << 32);
+            ASSERT_EQ(std::bit_cast<std::uint64_t>(z0[j * stride + k]),
+                      std::bit_cast<std::uint64_t>(want[0]))
+                << "seed " << seed << " first " << first << " count " << count << " step "
+                << steps[j] << " k " << k;
+            ASSERT_EQ(std::bit_cast<std::uint64_t>(z1[j * stride + k]),
+                      std::bit_cast<std::uint64_t>(want[1]))
+                << "seed " << seed << " first " << first << " count " << count << " step "
+                << steps[j] << " k " << k;
+          }
+        }
+      }
+    }
+  }
 }
 
 // fill_normal / fill_uniform == repeated scalar calls, from any position, and the stream draws
