@@ -724,7 +724,15 @@ struct Filter::Impl {
   void resample(std::uint64_t scan_step) {
     const Clock::time_point t0 = Clock::now();
     try {
-      const parallel::ResampleOutcome outcome = resampler.resample(store, config.seed, scan_step);
+      // After a heavy pass the gather releases many path copies (about 0.2 us a particle at
+      // M = 100 with ML on a 10^4 map): split it as finely as the pass (N = 10^4, M = 100,
+      // 2 threads: 333 -> 313 us per update); after a light one it stays at the resampler's
+      // grain, inline for small filters.
+      const std::size_t threads = kernel.threads();
+      const std::size_t grain =
+          heavy_pass && threads > 1 ? std::max<std::size_t>(1, store.size() / (4 * threads)) : 0;
+      const parallel::ResampleOutcome outcome =
+          resampler.resample(store, config.seed, scan_step, grain);
       resamples += outcome.resampled ? 1 : 0;
     } catch (const std::invalid_argument& e) {
       // A NaN or +inf log-weight: a numerical failure inside the filter, not refused input (the

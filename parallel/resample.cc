@@ -469,12 +469,12 @@ void Resampler::draw(ResampleScheme scheme, std::uint64_t seed, std::uint64_t st
 }
 
 ResampleOutcome Resampler::resample(memory::ParticleStore& store, std::uint64_t seed,
-                                    std::uint64_t step) {
+                                    std::uint64_t step, std::size_t grain_override) {
   const std::span<double> log_weight = store.log_weight();
   const WeightSummary summary = summarize(log_weight);
   const std::size_t m = log_weight.size();
   const ParticleKernel& kernel = *kernel_;
-  const std::size_t g = grain();
+  const std::size_t g = grain_override != 0 ? grain_override : grain();
   if (!should_resample(policy_, summary.effective_sample_size, m)) {
     subtract_in_place(log_weight, summary.log_sum, kernel, g);
     ancestors_.clear();

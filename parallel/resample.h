@@ -130,8 +130,11 @@ class Resampler {
   // M ancestors with the policy's scheme from the streams of (seed, step), gather the store
   // (in the kernel's arena; maps no survivor holds are released in parallel) and set every
   // log-weight to -log M; otherwise normalise the log-weights in place (l_i -= log-sum), so
-  // they never drift. Throws as `summarize` (and then changes nothing), or std::bad_alloc.
-  ResampleOutcome resample(memory::ParticleStore& store, std::uint64_t seed, std::uint64_t step);
+  // they never drift. `grain` (0: grain()) overrides the grain for this call: a filter whose
+  // step was heavy has many path copies to release and splits its gather finely. Throws as
+  // `summarize` (and then changes nothing), or std::bad_alloc.
+  ResampleOutcome resample(memory::ParticleStore& store, std::uint64_t seed, std::uint64_t step,
+                           std::size_t grain = 0);
 
   // Validates `log_weight` and returns its summary; keeps the cumulative weights for `draw`.
   // Throws std::invalid_argument (empty, or NaN / +inf at a named particle), std::domain_error
