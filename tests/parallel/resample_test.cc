@@ -739,7 +739,10 @@ TEST(ResampleStore, GathersPosesSharesMapsAndFreesTheDead) {
   const int landmarks = 20;
   const std::vector<double> l = make_log_weights(m, Shape::kPeaked, 4);
   std::vector<std::vector<double>> x_after;
-  for (unsigned threads : {1u, 2u}) {
+  // The last: a per-call grain far below the resampler's (as after a heavy filter pass).
+  const std::pair<unsigned, std::size_t> layouts[] = {{1u, 0}, {2u, 0}, {2u, 7}};
+  for (const auto& [threads, call_grain] : layouts) {
+    SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(call_grain));
     memory::MallocHeap heap;
     {
       const ParticleKernel kernel({.threads = threads, .grain = 128});
@@ -749,7 +752,7 @@ TEST(ResampleStore, GathersPosesSharesMapsAndFreesTheDead) {
       ASSERT_EQ(heap.stats().live_nodes, nodes_per_map * static_cast<std::int64_t>(m));
 
       Resampler resampler({}, kernel);
-      const ResampleOutcome outcome = resampler.resample(store, 2718, 3);
+      const ResampleOutcome outcome = resampler.resample(store, 2718, 3, call_grain);
       EXPECT_TRUE(outcome.resampled);
       const auto ancestors = resampler.last_ancestors();
       ASSERT_EQ(ancestors.size(), m);
@@ -776,6 +779,7 @@ TEST(ResampleStore, GathersPosesSharesMapsAndFreesTheDead) {
     EXPECT_EQ(heap.stats().live_nodes, 0);
   }
   EXPECT_EQ(x_after[0], x_after[1]);
+  EXPECT_EQ(x_after[0], x_after[2]);
 }
 
 TEST(ResampleStore, PolicyBelowThresholdNormalisesInstead) {
