@@ -20,6 +20,8 @@
 //     thread. The result is therefore bit-identical for any thread count and any grain, which
 //     `tbb::parallel_reduce` (whose tree follows the scheduler's splitting) does not promise.
 //   - `execute(f)`: runs f inside the arena (for TBB algorithms that the kernel does not wrap).
+//   - `BackgroundTask` (below): one task at a time on the kernel's threads while the caller
+//     goes on, e.g. the next pass's random numbers computed during this pass.
 //
 // Small inputs (a single task's worth of blocks) and one-thread kernels run inline on the
 // calling thread, without entering the arena, so the kernel costs a few nanoseconds there. A
@@ -57,6 +59,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <thread>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -68,6 +71,7 @@
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/partitioner.h>
 #include <oneapi/tbb/task_arena.h>
+#include <oneapi/tbb/task_group.h>
 
 #include "parallel/internal/thread_fork_join.h"
 
@@ -290,6 +294,60 @@ class ParticleKernel {
   std::unique_ptr<tbb::global_control> raise_limit_;  // only when threads_ > default
   // task_arena::execute is not const; the arena is internally synchronised.
   std::unique_ptr<tbb::task_arena> arena_;
+};
+
+// One task at a time in the background: start(f) hands f to the kernel's threads and returns,
+// wait() returns once f has finished (the caller helps run it if no worker has taken it yet, so
+// it never waits on an idle pool). With a one-thread kernel start() runs f inline. Under TSan
+// builds f runs on a std::thread (see the file comment). What f writes may be read after
+// wait(); nothing it touches may be used by the caller in between.
+// Thread safety: one owner thread calls start and wait. Costs: start about a microsecond (an
+// arena entry and a spawn; a sleeping worker may take longer to pick f up, the owner's wait
+// then runs it); no allocation beyond f's copy.
+class BackgroundTask {
+ public:
+  explicit BackgroundTask(const ParticleKernel& kernel) : kernel_(&kernel) {}
+  BackgroundTask(const BackgroundTask&) = delete;
+  BackgroundTask& operator=(const BackgroundTask&) = delete;
+  // Waits for the running task.
+  ~BackgroundTask() { wait(); }
+
+  // Waits for the previous task, then starts f. f must not throw.
+  template <class F>
+  void start(F&& f) {
+    wait();
+    if (kernel_->threads() == 1) {
+      f();
+      return;
+    }
+#if FASTSLAM_PARALLEL_TSAN
+    thread_ = std::thread(std::forward<F>(f));
+#else
+    kernel_->execute([&] { group_.run(std::forward<F>(f)); });
+    running_ = true;
+#endif
+  }
+
+  // Returns when the last task started has finished.
+  void wait() {
+#if FASTSLAM_PARALLEL_TSAN
+    if (thread_.joinable()) thread_.join();
+#else
+    if (running_) {
+      kernel_->execute([&] { group_.wait(); });
+      running_ = false;
+    }
+#endif
+  }
+
+ private:
+  const ParticleKernel* kernel_;
+#if FASTSLAM_PARALLEL_TSAN
+  std::thread thread_;
+#else
+  tbb::task_group group_;
+  bool running_ = false;
+#endif
 };
 
 }  // namespace fastslam::parallel

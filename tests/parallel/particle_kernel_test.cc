@@ -383,4 +383,52 @@ TEST(ParticleKernel, MoreThreadsThanCoresStillCoverEverything) {
 }
 
 }  // namespace
+// ---- BackgroundTask -----------------------------------------------------------------------
+
+TEST(BackgroundTask, OneThreadRunsInlineInStart) {
+  const ParticleKernel kernel({.threads = 1, .grain = 4});
+  BackgroundTask task(kernel);
+  std::thread::id ran_on;
+  task.start([&] { ran_on = std::this_thread::get_id(); });
+  EXPECT_EQ(ran_on, std::this_thread::get_id());  // already done when start returns
+  task.wait();
+}
+
+TEST(BackgroundTask, StartReturnsBeforeTheTaskEndsAndWaitSeesItsWrites) {
+  const ParticleKernel kernel({.threads = 2, .grain = 4});
+  BackgroundTask task(kernel);
+  std::atomic<bool> released{false};
+  bool saw_release = false;  // written by the task, read after wait()
+  std::vector<int> written;
+  task.start([&] {
+    // Run inline in start(), this would wait for a release that start's caller cannot give.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (!released.load() && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::yield();
+    }
+    saw_release = released.load();
+    written.assign(1000, 7);
+  });
+  released.store(true);
+  task.wait();
+  EXPECT_TRUE(saw_release);
+  EXPECT_EQ(written, std::vector<int>(1000, 7));
+}
+
+TEST(BackgroundTask, StartWaitsForThePreviousTaskAndTheDestructorForTheLast) {
+  const ParticleKernel kernel({.threads = 2, .grain = 4});
+  long count = 0;  // plain: the tasks must never overlap (TSan checks it)
+  bool last_done = false;
+  {
+    BackgroundTask task(kernel);
+    for (int k = 0; k < 200; ++k) task.start([&] { ++count; });
+    task.start([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      last_done = true;
+    });
+  }
+  EXPECT_EQ(count, 200);
+  EXPECT_TRUE(last_done);
+}
+
 }  // namespace fastslam::parallel
