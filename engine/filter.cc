@@ -101,7 +101,8 @@ struct AssociationScratch {
 // of the thread count so that at the end of a pass no thread waits long for another (M = 1000,
 // grain 128, 2 threads: 8 blocks of 120 or 128 particles, 496/504 per thread when split evenly,
 // where blocks of exactly 128 would give 7 and a block of 104). m <= grain runs as one block
-// on the calling thread: webmap FS1 with M = 100 and 2 threads took 50 ms split in two tasks
+// on the calling thread unless the pass is heavy (below): webmap FS1 with M = 100 and 2 threads
+// took 50 ms split in two tasks
 // against 34 ms inline (a pass is ~17 us of work; the second thread adds its dispatch and
 // the cross-core traffic of the particles' maps, which the sequential resampling touches).
 // A heavy pass (`heavy`: the previous pass's work exceeded FilterConfig::split_seconds, e.g.

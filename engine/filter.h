@@ -34,7 +34,10 @@
 //
 // Ownership: the filter owns its particles, maps, node heap and threads (a TBB arena of
 // `config.threads`). `observe` borrows the scan for the call only.
-// Thread safety: thread-compatible: one call at a time; the filter runs its own parallel work.
+// Thread safety: thread-compatible: one call at a time; the filter runs its own parallel work
+// (with two or more threads and steps too light to split, a task of its own may still be
+// drawing the next step's motion noise after observe returns; it touches only the filter's
+// internals and the destructor waits for it).
 // Costs (M particles, K queued controls, Z observations in the scan, N landmarks per map, k
 // candidates and landmarks in view per particle): `predict` O(1) amortised; `observe`
 // O(M (K + Z log N)) work with known ids, O(M (K + (Z + k) log N + Z k)) unknown, spread over

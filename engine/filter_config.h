@@ -110,10 +110,10 @@ struct FilterConfig {
   unsigned threads = 0;      // 0: every core
   // Particles per parallel task (a pass deals whole groups of 8 particles to about
   // particles / grain tasks, see engine/filter.cc; up to `grain` particles run on the calling
-  // thread alone). 128 amortises the per-block setup of the vectorised control loop (about
-  // 0.4 us; webmap FS1, M = 100, one thread: 37.5 ms at 16, 33.2 ms at 128), keeps filters
-  // too small to gain from a second thread inline, and gives each thread several tasks from
-  // M = 1000 up.
+  // thread alone, unless the pass is heavy: see split_seconds). 128 amortises the per-block
+  // setup of the vectorised control loop (about 0.4 us; webmap FS1, M = 100, one thread:
+  // 37.5 ms at 16, 33.2 ms at 128), keeps filters too small to gain from a second thread
+  // inline, and gives each thread several tasks from M = 1000 up.
   std::size_t grain = 128;
   // A pass (the controls since the last scan, and the scan) whose work took longer than this
   // on the last pass is split into at least one block per thread, whatever the grain: Victoria
