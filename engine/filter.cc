@@ -71,16 +71,17 @@ struct PhaseTimes {
 // and stable across copies; a scan may hold fewer than 2^20 observations.
 constexpr std::uint64_t kObservationsPerScanLimit = std::uint64_t{1} << 20;
 
-// Per-thread scratch of the unknown-association step of one particle.
 // The largest eigenvalue of a stored landmark's covariance, rounded up to a float: its spatial
 // index entry's extent, which gates candidates before the map is read (associate_particle).
 float largest_variance(const memory::Landmark& l) {
   const double half_gap = 0.5 * (l.sxx - l.syy);
   const double v = 0.5 * (l.sxx + l.syy) + std::sqrt(half_gap * half_gap + l.sxy * l.sxy);
   const auto f = static_cast<float>(v);
-  return static_cast<double>(f) >= v ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
+  return static_cast<double>(f) >= v ? f
+                                     : std::nextafter(f, std::numeric_limits<float>::infinity());
 }
 
+// Per-thread scratch of the unknown-association step of one particle.
 struct AssociationScratch {
   std::vector<AssociationCandidate> candidates;  // tag: index into `terms` (FastSLAM 1.0)
   std::vector<LandmarkObservation> terms;        // 1.0: each candidate's EKF terms, reused
@@ -101,10 +102,10 @@ struct AssociationScratch {
 // of the thread count so that at the end of a pass no thread waits long for another (M = 1000,
 // grain 128, 2 threads: 8 blocks of 120 or 128 particles, 496/504 per thread when split evenly,
 // where blocks of exactly 128 would give 7 and a block of 104). m <= grain runs as one block
-// on the calling thread unless the pass is heavy (below): webmap FS1 with M = 100 and 2 threads
-// took 50 ms split in two tasks
-// against 34 ms inline (a pass is ~17 us of work; the second thread adds its dispatch and
-// the cross-core traffic of the particles' maps, which the sequential resampling touches).
+// on the calling thread unless the pass is heavy (below): webmap FS1 with M = 100 and 2
+// threads took 50 ms split in two tasks against 34 ms inline (a pass is ~17 us of work; the
+// second thread adds its dispatch and the cross-core traffic of the particles' maps, which the
+// sequential resampling touches).
 // A heavy pass (`heavy`: the previous pass's work exceeded FilterConfig::split_seconds, e.g.
 // Victoria Park's association, ~5 us per particle and scan) gets at least four blocks per
 // thread whatever the grain: its work dwarfs the dispatch, and a thread slowed by another
@@ -261,8 +262,8 @@ struct Filter::Impl {
     kernel.for_each_particle(
         blocks.tasks, [&](std::size_t t) { run_block(t, blocks.begin(t), blocks.begin(t + 1)); },
         1);
-    heavy_pass = std::accumulate(block_seconds.begin(), block_seconds.end(), 0.0) >
-                 config.split_seconds;
+    heavy_pass =
+        std::accumulate(block_seconds.begin(), block_seconds.end(), 0.0) > config.split_seconds;
     if (record) reduce_recorded(m);
   }
 
