@@ -8,7 +8,8 @@
 //   - a node covers a square of side 2^level metres (level an integer; every cell boundary is
 //     an exact double, so which child holds a point is decided exactly); an inner node has
 //     4^kLevelsPerNode children (a 4-way quadtree, or 16-way: two quadtree levels per node,
-//     which halves the depth); a leaf holds up to kLeafCapacity entries (slot, x, y) inline;
+//     which halves the depth); a leaf holds up to kLeafCapacity entries (slot, extent, x, y)
+//     inline;
 //   - a leaf that overflows splits (recursively, until every part fits), unless its square is
 //     at the minimum size (side 2^kMinLevel, or the finest side at which its boundaries are
 //     still exact doubles); such a leaf grows instead, up to kMaxLeafEntries entries (points
@@ -121,8 +122,8 @@ class BasicSpatialIndex {
     return root_ == other.root_;
   }
 
-  // Adds (slot, x, y) with `extent`. Throws std::invalid_argument when x or y is not finite or exceeds
-  // kMaxCoordinate in magnitude, std::length_error when a finest-size leaf is full, or
+  // Adds (slot, x, y) with `extent`. Throws std::invalid_argument when x or y is not finite
+  // or exceeds kMaxCoordinate in magnitude, std::length_error when a finest-size leaf is full, or
   // std::bad_alloc; then the index holds the same entries as before.
   void insert(Slot slot, double x, double y, float extent = 0.0f);
 
@@ -131,8 +132,8 @@ class BasicSpatialIndex {
   // holds the same entries as before.
   void erase(Slot slot, double from_x, double from_y);
 
-  // Moves the entry (slot, from) to `to`, where it holds `extent`. Throws as erase (no such entry) and insert (bad `to`,
-  // bad_alloc); then the index holds the same entries as before.
+  // Moves the entry (slot, from) to `to`, where it holds `extent`. Throws as erase (no such
+  // entry) and insert (bad `to`, bad_alloc); then the index holds the same entries as before.
   void move(Slot slot, double from_x, double from_y, double to_x, double to_y,
             float extent = 0.0f);
 
