@@ -450,8 +450,27 @@ struct Filter::Impl {
       fold_proposal_lanes<N>(sensor, r, o.z, proposal, {lm[0], lm[1], lm[2], lm[3], lm[4]}, log_w,
                              count);
     }
-    sample_pose_lanes<N>(proposal, draws, state, count);
     std::fill_n(&pose_cov[begin * 25], count * 25, 0.0);
+    if constexpr (N > 3) {
+      // As draw_state (engine/proposal.h): only the pose is drawn; the velocities keep their
+      // Gaussian conditioned on it (normals from 3 on zeroed; covariance F22 F22^T).
+      thread_local std::vector<double> pose_only;
+      pose_only.assign(draws, draws + N * count);
+      for (std::size_t l = 0; l < count; ++l) std::fill_n(&pose_only[l * N + 3], N - 3, 0.0);
+      sample_pose_lanes<N>(proposal, pose_only.data(), state, count);
+      for (std::size_t l = 0; l < count; ++l) {
+        PoseGaussian<N> g;
+        for (int row = 0, e = 0; row < N; ++row) {
+          for (int c = row; c < N; ++c, ++e) g.cov(row, c) = g.cov(c, row) = proposal.cov[e][l];
+        }
+        Eigen::Matrix<double, N, N> rest;
+        draw_state<N>(g, pose_only.data() + l * N, rest);
+        Eigen::Map<Eigen::Matrix<double, N, N>> slot(&pose_cov[(begin + l) * 25]);
+        slot = rest;
+      }
+    } else {
+      sample_pose_lanes<N>(proposal, draws, state, count);
+    }
     double* const log_weight = store.log_weight().data();
     for (std::size_t l = 0; l < count; ++l) log_weight[begin + l] += log_w[l];
   }
@@ -647,8 +666,9 @@ struct Filter::Impl {
         proposal = fold<N>(proposal, terms);
       }
       if (config.association == Association::kMaximumLikelihood) log_w = folded;
-      save(i, sample_pose<N>(proposal, draw));
-      cov_of(i).setZero();
+      Eigen::Matrix<double, N, N> rest;
+      save(i, draw_state<N>(proposal, draw, rest));
+      cov_of(i) = rest;
     }
     log_weight[i] += log_w;
   }
@@ -732,6 +752,12 @@ struct Filter::Impl {
     return std::max(r(0, 0), range * range * r(1, 1));
   }
 
+  // Whether pose_cov holds anything between a scan and the next control: the velocities'
+  // covariance of FastSLAM 2.0 on the no-odometry state (draw_state); zero otherwise.
+  bool carries_velocity_cov() const {
+    return config.algorithm == Algorithm::kFastSlam2 && config.motion.kind == MotionKind::kBrownian;
+  }
+
   void resample(std::uint64_t scan_step) {
     const Clock::time_point t0 = Clock::now();
     try {
@@ -745,6 +771,16 @@ struct Filter::Impl {
       const parallel::ResampleOutcome outcome =
           resampler.resample(store, config.seed, scan_step, grain);
       resamples += outcome.resampled ? 1 : 0;
+      if (outcome.resampled && carries_velocity_cov()) {
+        // FastSLAM 2.0 without odometry: the velocities' covariance outlives the scan
+        // (draw_state), so it follows its particle to the descendants.
+        const std::span<const std::uint32_t> ancestors = resampler.last_ancestors();
+        cov_scratch.resize(pose_cov.size());
+        for (std::size_t i = 0; i < ancestors.size(); ++i) {
+          std::copy_n(&pose_cov[std::size_t{ancestors[i]} * 25], 25, &cov_scratch[i * 25]);
+        }
+        pose_cov.swap(cov_scratch);
+      }
     } catch (const std::invalid_argument& e) {
       // A NaN or +inf log-weight: a numerical failure inside the filter, not refused input (the
       // scan has been applied), so not std::invalid_argument, whose contract is "unchanged".
@@ -764,7 +800,10 @@ struct Filter::Impl {
   parallel::ParticleKernel kernel;
   parallel::Resampler resampler;
   memory::ParticleStore store;
-  std::vector<double> pose_cov;  // FastSLAM 2.0: motion covariance since the last scan, N x N
+  // FastSLAM 2.0: the state's covariance, N x N in slots of 25: the motion's since the last scan
+  // plus, without odometry, the velocities' left by the scan's draw (draw_state).
+  std::vector<double> pose_cov;
+  std::vector<double> cov_scratch;  // resample's gather of pose_cov
   RangeBearingModel sensor;
   Eigen::Matrix2d r;
   std::vector<PendingControl> pending;

@@ -211,4 +211,37 @@ inline Eigen::Matrix<double, N, 1> sample_pose(const PoseGaussian<N>& proposal,
   return s;
 }
 
+// The FastSLAM 2.0 draw: the pose (components 0-2) from the proposal; for a longer state (N = 5,
+// the no-odometry velocities v, omega) the rest is NOT drawn but kept as the Gaussian
+// conditioned on the drawn pose: its mean goes into the returned state and its covariance into
+// the lower-right block of `cov_after` (zero elsewhere), where the next prediction starts from.
+// Given the pose path the velocities enter the motion linearly (eq. 81), so this is the
+// Rao-Blackwellised treatment of them (a marginalised particle filter). Drawing them as well
+// would make the next prior treat them as exact: a wrong v or omega could then never be
+// corrected by a measurement, only by resampling, and FastSLAM 2.0 with one particle diverged
+// on Victoria Park without odometry (docs/victoria-park.md). With F = psd_factor(cov) lower
+// triangular the draw is mean + F n with n's components from 3 on set to zero, and the
+// conditional covariance is F22 F22^T (F22 = F's lower-right block). For N <= 3 this is
+// exactly sample_pose and a zero covariance. REQUIRES: normals points at N readable doubles.
+template <int N>
+inline Eigen::Matrix<double, N, 1> draw_state(const PoseGaussian<N>& proposal,
+                                              const double* normals,
+                                              Eigen::Matrix<double, N, N>& cov_after) {
+  constexpr int kPose = N < 3 ? N : 3;
+  const Eigen::Matrix<double, N, N> f = psd_factor<N>(proposal.cov);
+  Eigen::Matrix<double, N, 1> n = Eigen::Map<const Eigen::Matrix<double, N, 1>>(normals);
+  cov_after.setZero();
+  if constexpr (N > kPose) {
+    n.template tail<N - kPose>().setZero();
+    const Eigen::Matrix<double, N - kPose, N - kPose> f22 =
+        f.template bottomRightCorner<N - kPose, N - kPose>();
+    cov_after.template bottomRightCorner<N - kPose, N - kPose>() = f22 * f22.transpose();
+  }
+  Eigen::Matrix<double, N, 1> s = proposal.mean + f * n;
+  if constexpr (kHeadingIndex<N> >= 0) {
+    s[kHeadingIndex<N>] = wrap_angle(s[kHeadingIndex<N>]);
+  }
+  return s;
+}
+
 }  // namespace fastslam::engine

@@ -66,6 +66,34 @@ void add_config_option(CLI::App& cmd, RunWords& w) {
       ->check(CLI::ExistingFile);
 }
 
+// The Victoria Park reader's options (run and convert): heading fit, control cuts, the gate.
+void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  cmd.add_option("--heading-fit-seconds", o.victoria_park.heading_fit_seconds,
+                 "victoria-park: seconds of GPS after the first fix the start heading is fitted to")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("--split-controls", o.victoria_park.split_controls_at_scans,
+               "victoria-park: cut the odometry interval holding a scan at the scan time");
+  VictoriaParkGate& gate = o.victoria_park.gate;
+  cmd.add_option("--vp-min-range", gate.min_range,
+                 "victoria-park: detections nearer than this are dropped, m")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--vp-max-range", gate.max_range,
+                 "victoria-park: detections farther than this are dropped, m (also the range "
+                 "within which negative information expects trees)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--vp-min-bearing-deg", w.vp_min_bearing_deg,
+                 "victoria-park: detections right of this bearing are dropped, degrees "
+                 "(default -87.1: the detector's scan-edge margin)");
+  cmd.add_option("--vp-max-bearing-deg", w.vp_max_bearing_deg,
+                 "victoria-park: detections left of this bearing are dropped, degrees (default 87.1)");
+  cmd.add_option("--vp-max-diameter", gate.max_diameter,
+                 "victoria-park: detections wider than this are dropped, m (default: no limit)")
+      ->check(CLI::PositiveNumber);
+}
+
 }  // namespace
 
 void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
@@ -165,12 +193,7 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::NonNegativeNumber);
   cmd.add_option("--initial-heading-deg", w.initial_heading_deg,
                  "start heading, degrees (default: the source's; victoria-park fits it to GPS)");
-  cmd.add_option("--heading-fit-seconds", o.victoria_park.heading_fit_seconds,
-                 "victoria-park: seconds of GPS after the first fix the start heading is fitted to")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd.add_flag("--split-controls", o.victoria_park.split_controls_at_scans,
-               "victoria-park: cut the odometry interval holding a scan at the scan time");
+  add_victoria_park_options(cmd, o, w);
   cmd.add_option("--out", o.out,
                  "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
   cmd.add_option("--trace", o.trace,
@@ -199,6 +222,7 @@ void add_convert_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::ExistingDirectory);
   add_world_options(cmd, o, w);
   cmd.add_option("--seed", o.filter.seed, "random seed of the simulation")->capture_default_str();
+  add_victoria_park_options(cmd, o, w);
   cmd.add_option("--out", o.out, "the log file to write (docs/log-format.md); required");
   add_config_option(cmd, w);
 }
@@ -276,6 +300,12 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
       if (!given("--sigma-range")) o.noise.sigma_range = vp.fastslam2_sigma_range;
       if (!given("--sigma-bearing")) o.noise.sigma_bearing = vp.fastslam2_sigma_bearing;
     }
+  }
+  if (given("--vp-min-bearing-deg")) {
+    o.victoria_park.gate.min_bearing = w.vp_min_bearing_deg * std::numbers::pi / 180;
+  }
+  if (given("--vp-max-bearing-deg")) {
+    o.victoria_park.gate.max_bearing = w.vp_max_bearing_deg * std::numbers::pi / 180;
   }
   if (given("--initial-heading-deg")) {
     o.initial_heading = w.initial_heading_deg * std::numbers::pi / 180;

@@ -30,6 +30,7 @@ struct RunWords {
   std::string scheme = "systematic";
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
   double initial_heading_deg = 0;
+  double vp_min_bearing_deg = 0, vp_max_bearing_deg = 0;  // given or not: the gate's defaults
   std::string config;  // --config FILE.json
 };
 

@@ -37,6 +37,7 @@ void check_options(const VictoriaParkOptions& o) {
               g.min_bearing < g.max_bearing && g.min_bearing >= -std::numbers::pi &&
               g.max_bearing <= std::numbers::pi,
           "gate bearings must be finite with -pi <= min_bearing < max_bearing <= pi");
+  require(g.max_diameter > 0, "gate max_diameter must be > 0 (infinity for no limit)");
   for (double s : {o.sigma_speed, o.sigma_steer, o.sigma_range, o.sigma_bearing}) {
     require(std::isfinite(s) && s > 0, "noises must be finite and > 0");
   }
@@ -143,7 +144,7 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
       ++out.detections;
       const VictoriaParkGate& g = options.gate;
       if (row[2] < g.min_range || row[2] > g.max_range || row[3] < g.min_bearing ||
-          row[3] > g.max_bearing) {
+          row[3] > g.max_bearing || row[4] > g.max_diameter) {
         ++out.gated_out;
         continue;
       }

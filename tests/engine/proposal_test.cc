@@ -398,5 +398,93 @@ TEST(SamplePoseTest, DrawsHaveTheProposalMoments) {
   }
 }
 
+
+// draw_state on the pose-only state is sample_pose with nothing left over.
+TEST(DrawStateTest, PoseOnlyStateIsSamplePose) {
+  std::mt19937_64 rng(41);
+  std::normal_distribution<double> normal;
+  for (int trial = 0; trial < 50; ++trial) {
+    PoseGaussian<3> g;
+    g.mean << normal(rng), normal(rng), random_heading(rng);
+    g.cov = random_spd<3>(rng, 0.3);
+    const double n[3] = {normal(rng), normal(rng), normal(rng)};
+    Eigen::Matrix3d rest = Eigen::Matrix3d::Constant(7.0);
+    EXPECT_EQ(draw_state<3>(g, n, rest), sample_pose<3>(g, n));
+    EXPECT_TRUE(rest.isZero(0.0));
+  }
+}
+
+// The no-odometry state (x, y, theta, v, omega): the pose is sample_pose's, the velocities are
+// the conditional mean given that pose and their covariance the conditional one (Schur
+// complement), both against a dense long-double oracle; nothing else is left in the covariance.
+TEST(DrawStateTest, VelocitiesKeepTheirGaussianGivenTheDrawnPose) {
+  std::mt19937_64 rng(43);
+  std::normal_distribution<double> normal;
+  for (int trial = 0; trial < 200; ++trial) {
+    PoseGaussian<5> g;
+    g.mean << normal(rng), normal(rng), random_heading(rng), 3.0 * normal(rng), normal(rng);
+    g.cov = random_spd<5>(rng, 0.2 + 0.1 * trial / 200.0);
+    double n[5];
+    for (double& v : n) v = normal(rng);
+    Eigen::Matrix<double, 5, 5> rest;
+    const Eigen::Matrix<double, 5, 1> s = draw_state<5>(g, n, rest);
+    const Eigen::Matrix<double, 5, 1> full = sample_pose<5>(g, n);
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(s[k], full[k], 1e-12) << k;
+    // Oracle: mu_2 + S21 S11^-1 (p - mu_1) and S22 - S21 S11^-1 S12.
+    const MatrixL<5> c = g.cov.cast<long double>();
+    const Eigen::Matrix<long double, 3, 3> s11_inv = c.topLeftCorner<3, 3>().inverse();
+    Eigen::Matrix<long double, 3, 1> dp;
+    for (int k = 0; k < 3; ++k) dp[k] = static_cast<long double>(s[k]) - g.mean[k];
+    dp[2] = static_cast<long double>(wrap_angle(static_cast<double>(dp[2])));
+    const Eigen::Matrix<long double, 2, 1> mean2 =
+        g.mean.tail<2>().cast<long double>() + c.bottomLeftCorner<2, 3>() * s11_inv * dp;
+    const Eigen::Matrix<long double, 2, 2> cov2 =
+        c.bottomRightCorner<2, 2>() -
+        c.bottomLeftCorner<2, 3>() * s11_inv * c.topRightCorner<3, 2>();
+    for (int k = 0; k < 2; ++k) {
+      EXPECT_NEAR(s[3 + k], static_cast<double>(mean2[k]), 1e-9 * (1 + std::abs(s[3 + k])));
+      for (int j = 0; j < 2; ++j) {
+        EXPECT_NEAR(rest(3 + k, 3 + j), static_cast<double>(cov2(k, j)), 1e-12) << k << j;
+      }
+    }
+    EXPECT_TRUE(rest.topRows<3>().isZero(0.0));
+    EXPECT_TRUE(rest.leftCols<3>().isZero(0.0));
+  }
+}
+
+// Drawn poses have the proposal's pose marginal, and the draw plus a draw from the left-over
+// Gaussian has the whole proposal's moments (the law of total covariance), 5 sds as above.
+TEST(DrawStateTest, PoseThenConditionalVelocitiesHaveTheProposalMoments) {
+  std::mt19937_64 rng(47);
+  std::normal_distribution<double> normal;
+  PoseGaussian<5> g;
+  g.mean << 1.0, -2.0, 0.5, 2.0, 0.1;
+  g.cov = random_spd<5>(rng, 0.3);
+  constexpr int kDraws = 200000;
+  Eigen::Matrix<double, 5, 1> sum = Eigen::Matrix<double, 5, 1>::Zero();
+  Eigen::Matrix<double, 5, 5> sum_sq = Eigen::Matrix<double, 5, 5>::Zero();
+  for (int i = 0; i < kDraws; ++i) {
+    double n[5];
+    for (double& v : n) v = normal(rng);
+    Eigen::Matrix<double, 5, 5> rest;
+    Eigen::Matrix<double, 5, 1> s = draw_state<5>(g, n, rest);
+    const Eigen::Matrix2d f = psd_factor<2>(rest.bottomRightCorner<2, 2>().eval());
+    s.tail<2>() += f * Eigen::Vector2d(normal(rng), normal(rng));
+    Eigen::Matrix<double, 5, 1> d = s - g.mean;
+    d[2] = wrap_angle(d[2]);
+    sum += d;
+    sum_sq += d * d.transpose();
+  }
+  const Eigen::Matrix<double, 5, 1> mean = sum / kDraws;
+  const Eigen::Matrix<double, 5, 5> cov = sum_sq / kDraws - mean * mean.transpose();
+  for (int i = 0; i < 5; ++i) {
+    EXPECT_NEAR(mean[i], 0.0, 5.0 * std::sqrt(g.cov(i, i) / kDraws));
+    for (int j = 0; j < 5; ++j) {
+      const double sd = std::sqrt((g.cov(i, i) * g.cov(j, j) + g.cov(i, j) * g.cov(i, j)) / kDraws);
+      EXPECT_NEAR(cov(i, j), g.cov(i, j), 5.0 * sd) << "(" << i << ", " << j << ")";
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fastslam::engine
