@@ -197,5 +197,26 @@ TEST_F(CommandLine, MotionNoneAndTheStartHeading) {
             std::string::npos);
 }
 
+// The Victoria Park gate: metres and degrees on the command line, the reader's defaults unless
+// given, config keys as for every flag, bad values refused naming the flag.
+TEST_F(CommandLine, VictoriaParkGateFlags) {
+  const VictoriaParkGate defaults;
+  RunOptions o = run("{}", "");
+  EXPECT_EQ(o.victoria_park.gate.min_range, defaults.min_range);
+  EXPECT_EQ(o.victoria_park.gate.max_range, defaults.max_range);
+  EXPECT_EQ(o.victoria_park.gate.min_bearing, defaults.min_bearing);
+  EXPECT_EQ(o.victoria_park.gate.max_bearing, defaults.max_bearing);
+  EXPECT_EQ(o.victoria_park.gate.max_diameter, defaults.max_diameter);
+  o = run(R"({"vp-max-range": 40, "vp-min-bearing-deg": -45})",
+          "--vp-min-range 2 --vp-max-bearing-deg 60 --vp-max-diameter 0.9");
+  EXPECT_EQ(o.victoria_park.gate.min_range, 2.0);
+  EXPECT_EQ(o.victoria_park.gate.max_range, 40.0);
+  EXPECT_DOUBLE_EQ(o.victoria_park.gate.min_bearing, -std::numbers::pi / 4);
+  EXPECT_DOUBLE_EQ(o.victoria_park.gate.max_bearing, std::numbers::pi / 3);
+  EXPECT_EQ(o.victoria_park.gate.max_diameter, 0.9);
+  EXPECT_NE(error_of("{}", "--vp-max-diameter 0").find("--vp-max-diameter"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--vp-min-range -1").find("--vp-min-range"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace fastslam::tools

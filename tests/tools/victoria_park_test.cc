@@ -169,6 +169,15 @@ TEST_F(VictoriaParkFiles, GateAndHeadingAreOptions) {
   EXPECT_EQ(vp.gated_out, 0u);
   EXPECT_EQ(vp.log.observations.size(), 5u);
   EXPECT_EQ(vp.log.header.start_pose[2], 0.5);
+  // Diameters are 0.3, 0.2, 0.2, 0.2, 0.2: a 0.25 m limit drops the first (0.25 keeps 0.2s).
+  options.gate.max_diameter = 0.25;
+  const VictoriaPark narrow = read_victoria_park(dir_, options);
+  EXPECT_EQ(narrow.gated_out, 1u);
+  EXPECT_EQ(narrow.log.observations.size(), 4u);
+  EXPECT_EQ(narrow.log.observations.front().range, 20.0);
+  options.gate.max_diameter = 0.0;
+  EXPECT_THROW(read_victoria_park(dir_, options), std::invalid_argument);
+  options.gate.max_diameter = 1.0;
   options.gate.min_range = 90.0;
   EXPECT_THROW(read_victoria_park(dir_, options), std::invalid_argument);
   options = {};
