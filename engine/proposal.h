@@ -8,7 +8,8 @@
 //   Sigma_s' = (G_s^T Q^-1 G_s + Sigma_s^-1)^-1                              (eq. 48)
 //   mu_s'    = Sigma_s' G_s^T Q^-1 (z - z_hat) + mu_s                        (eq. 49)
 // and the refined Gaussian is the prior of the next observation of the scan; the pose is drawn
-// once at the end (`sample_pose`), and every landmark is then updated at the DRAWN pose with the
+// once at the end (`draw_state`: `sample_pose` for the pose, the no-odometry velocities kept as
+// their Gaussian given it), and every landmark is then updated at the DRAWN pose with the
 // FastSLAM 1.0 update (eq. 53-55, engine/landmark_ekf.h).
 //
 // Where things are evaluated (the choice, made explicit):
@@ -32,7 +33,8 @@
 //    Q) is built from the same pieces. `fold` then folds the chosen one.
 //
 // State dimension N: the pose is (x, y, theta) (N = 3); (x, y, theta, v, omega) for the
-// no-odometry model (N = 5, the extra columns of G_s are zero); (x, y) for LG-SLAM (N = 2,
+// no-odometry model (N = 5, the extra columns of G_s are zero; the velocities are not drawn
+// but carried as a Gaussian from scan to scan, `draw_state`); (x, y) for LG-SLAM (N = 2,
 // engine/lg_slam.h). Component 2 is the heading, wrapped to (-pi, pi], when N >= 3.
 //
 // Ownership: values in, values out. Thread safety: pure functions. Cost: O(N^2) flops on fixed-size
