@@ -408,7 +408,7 @@ struct Filter::Impl {
   // landmarks folded into each particle's proposal in scan order (eq. 61), in lanes across the
   // particles (engine/landmark_batch.h), their log-likelihoods added to the weights; then each
   // pose drawn from its proposal (`draws`: N standard normals per particle) and the motion
-  // covariance restarted.
+  // covariance restarted (to the velocities' conditional one without odometry, draw_state).
   template <int N>
   void propose_block_known(std::size_t begin, std::size_t end,
                            const std::vector<PlannedObservation>& scan, const double* draws) {

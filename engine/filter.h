@@ -11,7 +11,9 @@
 // and the scan (a dispatch per control step would cost more than the work at M = 100), and
 // then resamples by the configured policy. FastSLAM 1.0 samples each control's motion noise;
 // 2.0 propagates the motion mean and covariance between scans and draws the pose once, from
-// the proposal folded over all the observations of the scan. Randomness comes from the keyed
+// the proposal folded over all the observations of the scan (without odometry the velocities
+// are not drawn: each particle keeps their Gaussian given its pose, engine/proposal.h
+// draw_state). Randomness comes from the keyed
 // streams of parallel/random_stream.h (seed, step, particle, purpose), so results are
 // bit-identical for any thread count and grain, and do not depend on when the queue is drained.
 //
