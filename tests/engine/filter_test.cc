@@ -791,6 +791,47 @@ FilterConfig weight_test_config(Algorithm algorithm) {
 const std::vector<std::pair<int, Eigen::Vector2d>> kTestLandmarks = {
     {0, {12.0, 9.0}}, {1, {15.0, -3.0}}, {2, {6.0, 14.0}}, {7, {20.0, 6.0}}};
 
+// FastSLAM 2.0 without odometry: the velocities' covariance a scan's draw leaves (draw_state)
+// follows its particle through resampling. Two particles, resampled whenever N_eff < M: after a
+// scan that tells them apart, both are copies of the better one; copies with the same state,
+// map and covariance weigh the same at the next scan, so N_eff = M and nothing is resampled.
+// A copy that kept its own covariance would weigh otherwise and be resampled again.
+TEST(FilterWeightTest, FastSlam2VelocityCovarianceFollowsItsParticle) {
+  const std::vector<std::pair<int, Eigen::Vector2d>> landmarks = {{0, {12.0, 9.0}},
+                                                                  {1, {15.0, -3.0}}};
+  bool checked = false;
+  for (std::uint64_t seed = 1; seed <= 20 && !checked; ++seed) {
+    FilterConfig c = base_config(Algorithm::kFastSlam2, 2);
+    c.seed = seed;
+    c.motion.kind = MotionKind::kBrownian;
+    c.motion.sigma_control[0] = 0.3;
+    c.motion.sigma_control[1] = 0.1;
+    c.sensor.sigma_range = 0.01;
+    c.sensor.sigma_bearing = 0.001;
+    c.initial_pose[3] = 2.0;  // v = 2 m/s along x
+    c.resample = {parallel::ResamplePolicy::When::kEssBelowFraction, 1.0,
+                  parallel::ResampleScheme::kSystematic};
+    Filter filter(c);
+    auto scan_at = [&](double x) {
+      for (int k = 0; k < 5; ++k) filter.predict({0.0, 0.0}, 0.1);
+      filter.observe(observe_from({x, 0.0, 0.0}, landmarks));
+    };
+    scan_at(1.0);  // new landmarks: equal weights, different draws
+    scan_at(2.0);  // tells the particles apart
+    const memory::ParticleStore& store = filter.particles();
+    const std::uint64_t resamples = filter.statistics().resamples;
+    bool copies = resamples == 1;
+    for (const auto column : {store.x(), store.y(), store.theta(), store.v(), store.omega()}) {
+      copies = copies && column[0] == column[1];
+    }
+    if (!copies) continue;  // this seed kept both: try the next
+    scan_at(3.0);
+    EXPECT_EQ(filter.statistics().resamples, resamples) << "seed " << seed;
+    checked = true;
+  }
+  EXPECT_TRUE(checked) << "no seed made both particles copies of one";
+}
+
 TEST(FilterWeightTest, FastSlam1MatchesEq31AndDenseEkf) {
   const FilterConfig config = weight_test_config(Algorithm::kFastSlam1);
   Filter filter(config);
