@@ -585,17 +585,31 @@ struct Filter::Impl {
         scan.empty() || !std::isfinite(pad)
             ? memory::SpatialIndex::Subtree()
             : index.covering(box[0] - pad, box[1] - pad, box[2] + pad, box[3] + pad);
+    // FastSLAM 1.0: candidates whose Mahalanobis distance provably exceeds the gate, from the
+    // index entry alone (range_bearing_mahalanobis2_bound; the margin far above its rounding),
+    // skip the map lookup and the exact gate, which would drop them too: the same candidates.
+    // Victoria Park: 17.5 M entries reach the bound, 7.8 M pass it, 7.4 M pass the gate.
+    const double bound_limit = gate * (1.0 + 1e-6);
     for (std::size_t j = 0; j < scan.size(); ++j) {
       const Eigen::Vector2d& z = scan[j].z;
       const auto [at_x, at_y, radius, spread] = scratch.discs[j];
-      index.within(near, at_x, at_y, radius, [&](const memory::SpatialEntry& e) {
+      // The observed direction (unit, to rounding): at = sensor position + z_r (cos, sin).
+      const Eigen::Vector2d direction((at_x - from[0]) / z[0], (at_y - from[1]) / z[0]);
+      // The same bound with each landmark's own largest eigenvalue (the entry's extent) in
+      // place of the map-wide one: most landmarks are far tighter than a new one at full range,
+      // so most entries of the disc stop in the index, before the map lookup and the
+      // trigonometry of the exact gate (Victoria Park: 17 entries a disc, 3.4 pass), and so do
+      // whole leaves whose widest landmark cannot reach (half of those the disc touches).
+      const auto reach2 = [&, spread = spread](float extent) {
+        return scale2 * gate * (static_cast<double>(extent) + spread);
+      };
+      index.within_reach(near, at_x, at_y, radius, reach2, [&](const memory::SpatialEntry& e) {
         if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
-        // The same bound with this landmark's own largest eigenvalue (the entry's extent) in
-        // place of the map-wide one: most landmarks are far tighter than a new one at full
-        // range, so most entries of the disc stop here, before the map lookup and the
-        // trigonometry of the exact gate (Victoria Park: 17 entries a disc, 3.4 pass).
-        const double dx = e.x - at_x, dy = e.y - at_y;
-        if (dx * dx + dy * dy > scale2 * gate * (static_cast<double>(e.extent) + spread)) return;
+        if (!fs2 &&
+            range_bearing_mahalanobis2_bound(from, direction, z[0], e.x, e.y,
+                                             static_cast<double>(e.extent), r) > bound_limit) {
+          return;
+        }
         const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
         const auto obs = static_cast<std::uint32_t>(j);
         if (fs2) {
