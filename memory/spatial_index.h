@@ -44,7 +44,8 @@
 // kLeafCapacity, W = 4^kLevelsPerNode):
 //   copy, move, size, empty: O(1), no allocation.
 //   within, within_reach, in_footprint: O(h + k + boxes touched), no allocation; the footprint
-//     is the disc query filtered by bearing (boxes are pruned by distance only); within_reach
+//     is the disc query filtered by bearing (boxes are pruned by distance only; a dot product
+//     decides the bearing, atan2 only within 1e-9 of the edge); within_reach
 //     also skips the leaves its widest entry's reach misses.
 //   nearest: O(h + k log k) typically (branch and bound), no allocation.
 //   insert: O(h + B) plus a split (O(B) nodes at most); copies the shared nodes on its path.

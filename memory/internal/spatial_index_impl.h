@@ -872,9 +872,27 @@ void BasicSpatialIndex<P>::in_footprint(double x, double y, double heading, doub
     return;
   }
   const double half = 0.5 * field_of_view;
+  // Most entries are clearly inside or outside: the cosine of their angle off the heading,
+  // (d . u) / |d|, against cos(half), decides them without trigonometry when the two differ by
+  // more than 1e-9, far above the rounding of either way (a few ulps). Entries in the band
+  // between (on the edge, or too close to the sensor for |d| to be exact) take the exact test.
+  const double ux = std::cos(heading);
+  const double uy = std::sin(heading);
+  const double cos_half = std::cos(half);
   within(x, y, max_range, [&](const SpatialEntry& e) {
     const double dx = e.x - x;
     const double dy = e.y - y;
+    const double norm = std::sqrt(dx * dx + dy * dy);
+    if (norm > 0x1p-500) {
+      const double gap = dx * ux + dy * uy - cos_half * norm;
+      if (gap > 1e-9 * norm) {
+        visit(e);
+        return;
+      }
+      if (gap < -1e-9 * norm) {
+        return;
+      }
+    }
     if ((dx == 0.0 && dy == 0.0) ||
         std::fabs(std::remainder(std::atan2(dy, dx) - heading, kTwoPi)) <= half) {
       visit(e);
