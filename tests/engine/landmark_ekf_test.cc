@@ -237,7 +237,8 @@ TEST(LandmarkEkfTest, InitialisationIsEquations69And70) {
 // The gate's lower bound from the mean and the largest eigenvalue alone never exceeds the exact
 // Mahalanobis distance (oracle: evaluate_observation), for innovations from ordinary to far
 // outside any gate, with and without a sensor offset, diagonal and correlated R; it is exact
-// for an isotropic covariance at zero bearing innovation, and drops most far candidates.
+// for an isotropic covariance at zero bearing innovation, and drops most far candidates. The
+// log-likelihood is at most that of Q = R at the same distance.
 TEST(LandmarkEkfTest, MahalanobisBoundNeverExceedsTheExactDistance) {
   std::mt19937_64 rng(31);
   std::normal_distribution<double> n;
@@ -261,8 +262,14 @@ TEST(LandmarkEkfTest, MahalanobisBoundNeverExceedsTheExactDistance) {
     const double extent = trial % 2 == 0 ? largest : largest * (1.0 + 3.0 * unit(rng));
     const double bound = range_bearing_mahalanobis2_bound(sensor, direction, s.z[0], s.lm.mean[0],
                                                           s.lm.mean[1], extent, s.r);
-    const double exact = evaluate_observation(s.model, s.lm, s.pose, s.z, s.r).mahalanobis2;
+    const LandmarkObservation obs = evaluate_observation(s.model, s.lm, s.pose, s.z, s.r);
+    const double exact = obs.mahalanobis2;
     ASSERT_LE(bound, exact * (1.0 + 1e-9) + 1e-12) << "trial " << trial;
+    // det Q >= det R, so ln N(v; 0, Q) <= -ln 2 pi - ln det R / 2 - m^2 / 2 (the filter's
+    // limit for candidates that maximum likelihood could take).
+    const double log_det_r = std::log(s.r(0, 0) * s.r(1, 1) - s.r(0, 1) * s.r(1, 0));
+    ASSERT_LE(obs.log_likelihood, -kLogTwoPi - 0.5 * log_det_r - 0.5 * exact + 1e-9)
+        << "trial " << trial;
     if (exact > 2.0 * 23.0) {
       ++far;
       dropped += bound > 23.0 ? 1 : 0;
