@@ -93,6 +93,8 @@ struct AssociationScratch {
   // Observation j's candidate disc: x, y, radius (from the variance bound), and the part of the
   // spread that is not the landmark's own (measurement, and for 2.0 the pose).
   std::vector<std::array<double, 4>> discs;
+  std::vector<memory::SpatialIndex::Disc> queries;  // the discs as the index takes them
+  std::vector<Eigen::Vector2d> directions;          // observation j's bearing in the world
 };
 
 // The particle blocks of a pass over m particles: whole groups of kMotionLanes particles (the
@@ -602,43 +604,48 @@ struct Filter::Impl {
     // chosen landmarks and the weight are the same. Victoria Park: 17.5 M entries reach the
     // bound, 6.3 M pass it (7.8 M against the gate alone), 6.0 M are kept.
     const double bound_limit = limit + 1e-6 * (std::fabs(limit) + 1.0);
+    // The observed directions (unit, to rounding): at = sensor position + z_r (cos, sin).
+    scratch.queries.resize(scan.size());
+    scratch.directions.resize(scan.size());
     for (std::size_t j = 0; j < scan.size(); ++j) {
-      const Eigen::Vector2d& z = scan[j].z;
       const auto [at_x, at_y, radius, spread] = scratch.discs[j];
-      // The observed direction (unit, to rounding): at = sensor position + z_r (cos, sin).
-      const Eigen::Vector2d direction((at_x - from[0]) / z[0], (at_y - from[1]) / z[0]);
-      // The same bound with each landmark's own largest eigenvalue (the entry's extent) in
-      // place of the map-wide one: most landmarks are far tighter than a new one at full range,
-      // so most entries of the disc stop in the index, before the map lookup and the
-      // trigonometry of the exact gate (Victoria Park: 17 entries a disc, 3.4 pass), and so do
-      // whole leaves whose widest landmark cannot reach (half of those the disc touches).
-      const auto reach2 = [&, spread = spread](float extent) {
-        return scale2 * gate * (static_cast<double>(extent) + spread);
-      };
-      index.within_reach(near, at_x, at_y, radius, reach2, [&](const memory::SpatialEntry& e) {
-        if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
-        if (!fs2 &&
-            range_bearing_mahalanobis2_bound(from, direction, z[0], e.x, e.y,
-                                             static_cast<double>(e.extent), r) > bound_limit) {
-          return;
-        }
-        const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
-        const auto obs = static_cast<std::uint32_t>(j);
-        if (fs2) {
-          const ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, r);
-          if (t.mahalanobis2 <= gate && !(ml && t.log_likelihood < log_p0)) {
-            scratch.candidates.push_back({obs, e.slot, t.log_likelihood});
-          }
-        } else {
-          const LandmarkObservation t = evaluate_observation(sensor, lm, pose, z, r);
-          if (t.mahalanobis2 <= gate && !(ml && t.log_likelihood < log_p0)) {
-            const auto tag = static_cast<std::uint32_t>(scratch.terms.size());
-            scratch.terms.push_back(t);
-            scratch.candidates.push_back({obs, e.slot, t.log_likelihood, tag});
-          }
-        }
-      });
+      scratch.queries[j] = {at_x, at_y, radius};
+      scratch.directions[j] = {(at_x - from[0]) / scan[j].z[0], (at_y - from[1]) / scan[j].z[0]};
     }
+    // The same bound with each landmark's own largest eigenvalue (the entry's extent) in place
+    // of the map-wide one: most landmarks are far tighter than a new one at full range, so most
+    // entries of a disc stop in the index, before the map lookup and the trigonometry of the
+    // exact gate (Victoria Park: 17 entries a disc, 3.4 pass), and so do whole leaves whose
+    // widest landmark cannot reach (half of those a disc touches). All the scan's discs go down
+    // the index together; the candidates' order does not matter (association.h sorts them).
+    const auto reach2 = [&](std::size_t j, float extent) {
+      return scale2 * gate * (static_cast<double>(extent) + scratch.discs[j][3]);
+    };
+    index.within_reach(
+        near, scratch.queries, reach2, [&](std::size_t j, const memory::SpatialEntry& e) {
+          const Eigen::Vector2d& z = scan[j].z;
+          if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
+          if (!fs2 &&
+              range_bearing_mahalanobis2_bound(from, scratch.directions[j], z[0], e.x, e.y,
+                                               static_cast<double>(e.extent), r) > bound_limit) {
+            return;
+          }
+          const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
+          const auto obs = static_cast<std::uint32_t>(j);
+          if (fs2) {
+            const ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, r);
+            if (t.mahalanobis2 <= gate && !(ml && t.log_likelihood < log_p0)) {
+              scratch.candidates.push_back({obs, e.slot, t.log_likelihood});
+            }
+          } else {
+            const LandmarkObservation t = evaluate_observation(sensor, lm, pose, z, r);
+            if (t.mahalanobis2 <= gate && !(ml && t.log_likelihood < log_p0)) {
+              const auto tag = static_cast<std::uint32_t>(scratch.terms.size());
+              scratch.terms.push_back(t);
+              scratch.candidates.push_back({obs, e.slot, t.log_likelihood, tag});
+            }
+          }
+        });
     scratch.assignment.resize(scan.size());
     const std::span<std::int64_t> chosen(scratch.assignment);
     double log_w;

@@ -190,6 +190,21 @@ class BasicSpatialIndex {
   void within_reach(const Subtree& from, double x, double y, double radius, const Reach2& reach2,
                     Visit&& visit) const;
 
+  // A disc of a batch query: centre and radius (finite, radius >= 0).
+  struct Disc {
+    double x = 0.0;
+    double y = 0.0;
+    double radius = 0.0;
+  };
+  // Many within_reach queries in one descent: visit(k, e) for every k < discs.size() and every
+  // entry e that within_reach(from, discs[k].x, discs[k].y, discs[k].radius,
+  // [&](float extent) { return reach2(k, extent); }, ...) visits, in no particular order (the
+  // queries' hits interleave). A scan's discs share most of their nodes and leaves, so this
+  // loads each once instead of once per disc. REQUIRES: reach2(k, extent) as within_reach's.
+  template <class Reach2, class Visit>
+  void within_reach(const Subtree& from, std::span<const Disc> discs, const Reach2& reach2,
+                    Visit&& visit) const;
+
   // visit(const SpatialEntry&) for every entry inside the sensor footprint of a sensor at
   // (x, y) facing `heading` (radians): within `max_range`, and with a bearing off the heading
   // by at most field_of_view / 2: |remainder(atan2(ey - y, ex - x) - heading, 2 pi)| <=
@@ -299,6 +314,17 @@ class BasicSpatialIndex {
   template <class Reach2, class Visit>
   static void within_node(const Node* node, const Cell& cell, double x, double y, double r2,
                           double prune2, double reach, const Reach2& reach2, Visit& visit);
+  // The batch query's discs below `node` whose bit is set in `active` (at most 64 at a time).
+  struct DiscBounds {
+    double x;
+    double y;
+    double r2;
+    double prune2;
+  };
+  template <class Reach2, class Visit>
+  static void within_many_node(const Node* node, const Cell& cell, const DiscBounds* discs,
+                               std::size_t first, std::uint64_t active, const Reach2& reach2,
+                               Visit& visit);
   // Whether extent a ranks before b in a leaf (larger; NaN before any number).
   static bool wider(float a, float b) noexcept { return a > b || (a != a && b == b); }
   // Puts the leaf's widest entry first (O(count)), after any change but an append.

@@ -863,6 +863,100 @@ void BasicSpatialIndex<P>::within_reach(const Subtree& from, double x, double y,
 }
 
 template <class P>
+template <class Reach2, class Visit>
+void BasicSpatialIndex<P>::within_many_node(const Node* node, const Cell& cell,
+                                            const DiscBounds* discs, std::size_t first,
+                                            std::uint64_t active, const Reach2& reach2,
+                                            Visit& visit) {
+  if (node->leaf()) {
+    const SpatialEntry* e = entries(node);
+    for (std::uint32_t i = 0; i < node->count; ++i) {
+      for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
+        const auto k = static_cast<unsigned>(std::countr_zero(bits));
+        const double dx = e[i].x - discs[k].x;
+        const double dy = e[i].y - discs[k].y;
+        const double d2 = dx * dx + dy * dy;
+        if (d2 <= discs[k].r2 && !(d2 > reach2(first + k, e[i].extent))) {
+          visit(first + k, e[i]);
+        }
+      }
+    }
+    return;
+  }
+  const auto* inner = static_cast<const Inner*>(node);
+  for (unsigned i = 0; i < kWidth; ++i) {
+    const Node* child = inner->child[i];
+    if (child == nullptr) {
+      continue;
+    }
+    const Cell sub = child_cell(cell, i);
+    const bool leaf = child->leaf() && child->count != 0;
+    std::uint64_t reached = 0;
+    for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
+      const auto k = static_cast<unsigned>(std::countr_zero(bits));
+      const double box2 = box_distance2(sub, discs[k].x, discs[k].y);
+      if (box2 > discs[k].prune2) {
+        continue;
+      }
+      if (leaf) {
+        // As within_node: the leaf's widest entry first, and no entry reaches farther.
+        const double widest2 = reach2(first + k, entries(child)[0].extent);
+        if (box2 > widest2 + std::fabs(widest2) * 0x1p-40) {
+          continue;
+        }
+      }
+      reached |= std::uint64_t{1} << k;
+    }
+    if (reached != 0) {
+      within_many_node(child, sub, discs, first, reached, reach2, visit);
+    }
+  }
+}
+
+template <class P>
+template <class Reach2, class Visit>
+void BasicSpatialIndex<P>::within_reach(const Subtree& from, std::span<const Disc> discs,
+                                        const Reach2& reach2, Visit&& visit) const {
+  if (root_ == nullptr) {
+    return;
+  }
+  // In groups of 64 (one bit each); per group, the discs inside `from`'s square (as
+  // within(from, ...) decides it) descend from there, the others from the root.
+  for (std::size_t first = 0; first < discs.size(); first += 64) {
+    const std::size_t n = std::min<std::size_t>(64, discs.size() - first);
+    std::array<DiscBounds, 64> bounds;
+    std::uint64_t inside = 0;
+    std::uint64_t outside = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const Disc& d = discs[first + k];
+      const double r2 = d.radius * d.radius;
+      const double prune2 = r2 + r2 * 0x1p-40;
+      bounds[k] = {d.x, d.y, r2, prune2};
+      bool in_from = false;
+      if (from.node_ != nullptr) {
+        const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
+        const double margin = 0x1p-30 * (std::fabs(d.x) + std::fabs(d.y) + reach);
+        in_from = d.x - reach - margin >= from.x_ && d.x + reach + margin < from.x_ + from.side_ &&
+                  d.y - reach - margin >= from.y_ && d.y + reach + margin < from.y_ + from.side_;
+      }
+      if (in_from) {
+        inside |= std::uint64_t{1} << k;
+      } else if (box_distance2(root_cell_, d.x, d.y) <= prune2) {
+        outside |= std::uint64_t{1} << k;
+      }
+    }
+    if (inside != 0) {
+      const Cell cell{from.x_, from.y_, from.side_, from.level_};
+      within_many_node(static_cast<const Node*>(from.node_), cell, bounds.data(), first, inside,
+                       reach2, visit);
+    }
+    if (outside != 0) {
+      within_many_node(root_, root_cell_, bounds.data(), first, outside, reach2, visit);
+    }
+  }
+}
+
+template <class P>
 template <class Visit>
 void BasicSpatialIndex<P>::in_footprint(double x, double y, double heading, double max_range,
                                         double field_of_view, Visit&& visit) const {

@@ -1,5 +1,5 @@
-// The spatial index against brute force: every query (within, within_reach, in_footprint,
-// nearest, for_each)
+// The spatial index against brute force: every query (within, within_reach alone and in
+// batches, in_footprint, nearest, for_each)
 // over random maps (uniform, clustered, duplicates, points on cell boundaries, huge
 // coordinates), through inserts, small and large moves and removals, after copies that each
 // change differently (one oracle per handle), resampling-style gathers and growth of the root;
@@ -201,6 +201,42 @@ template <class Index>
                  << "within_reach(subtree of side " << start.side() << ", " << query.x << ", "
                  << query.y << ", " << query.r << ", " << a << " * extent + " << b
                  << "): " << reached.size() << " entries, brute force " << expected.size();
+        }
+      }
+      // A batch: this disc and others around it (some far, some beyond the subtree), up to 70
+      // (two groups of 64), each with its own reach; every disc's hits as its own query's.
+      if (q % 4 == 2) {
+        using Disc = typename Index::Disc;
+        const std::size_t count = (q % 16 == 2) ? 70 : rng() % 9;
+        std::vector<Disc> discs;
+        std::vector<std::pair<double, double>> reach;
+        for (std::size_t k = 0; k < count; ++k) {
+          const double spread = (k % 5 == 4) ? 3.0 * extent : 2.0 * half + 1.0;
+          const double radius = radii[rng() % std::size(radii)] * unit(rng);
+          discs.push_back(
+              {query.x + spread * (unit(rng) - 0.5), query.y + spread * (unit(rng) - 0.5), radius});
+          const double rk2 = radius * radius;
+          reach.emplace_back(rk2 * scales[rng() % std::size(scales)] * unit(rng),
+                             (k % 3 == 1) ? 0.0 : rk2 * 0.2 * unit(rng));
+        }
+        for (const auto& start : {from, typename Index::Subtree()}) {
+          std::vector<std::vector<SpatialEntry>> hits(count);
+          index.within_reach(
+              start, std::span<const Disc>(discs),
+              [&](std::size_t k, float e) {
+                return reach[k].first * static_cast<double>(e) + reach[k].second;
+              },
+              [&](std::size_t k, const SpatialEntry& e) { hits.at(k).push_back(e); });
+          for (std::size_t k = 0; k < count; ++k) {
+            const std::vector<SpatialEntry> want = brute_within_reach(
+                oracle, discs[k].x, discs[k].y, discs[k].radius, reach[k].first, reach[k].second);
+            if (sorted(hits[k]) != want) {
+              return ::testing::AssertionFailure()
+                     << "batch within_reach, disc " << k << " of " << count << " (" << discs[k].x
+                     << ", " << discs[k].y << ", " << discs[k].radius << "): " << hits[k].size()
+                     << " entries, brute force " << want.size();
+            }
+          }
         }
       }
     }
