@@ -9,7 +9,9 @@
 //   apply_update(lm, obs, R)  -> K = Sigma G^T Q^-1, mu += K v, and the covariance in Joseph form
 //       Sigma = (I - K G) Sigma (I - K G)^T + K R K^T (eq. 25), which stays symmetric positive
 //       definite even when R is small against G Sigma G^T, where (I - K G) Sigma may not.
-// `update_landmark` does both and returns the log-likelihood. Everything is linearised at the
+// `update_landmark` does both and returns the log-likelihood; `range_bearing_mahalanobis2_bound`
+// bounds evaluate_observation's Mahalanobis distance from below without the covariance (a gate's
+// cheap first test). Everything is linearised at the
 // landmark's prior mean and the given pose (in FastSLAM 2.0: the pose drawn from the proposal,
 // eq. 51-55). The core overloads take (G, v) directly, so any measurement model plugs in.
 //
@@ -18,6 +20,7 @@
 // the model's linearisation (one sqrt, one atan2 for range-bearing); no allocation, all inline.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 
 #include <Eigen/Core>
@@ -115,6 +118,34 @@ inline LandmarkObservation evaluate_observation(const Eigen::Matrix2d& g,
   obs.mahalanobis2 = quad * inv_det;
   obs.log_likelihood = gaussian_log_density2(obs.mahalanobis2, obs.log_det_q);
   return obs;
+}
+
+// A lower bound on evaluate_observation(RangeBearingModel, lm, s, z, R).mahalanobis2 from the
+// landmark's mean (x, y) and a bound `extent` on its covariance's largest eigenvalue alone: no
+// covariance, no trigonometry, so a gate can drop most candidates before reading the map.
+// `sensor` is the sensor's position at s and `direction` the unit vector of z's bearing in the
+// world (sensor + z[0] * direction = the landmark position z implies).
+// Why it holds: G = G_mu has rows (d / r) and (perp(d) / q) for the offset d = mu - sensor,
+// q = |d|^2, so G G^T = diag(1, 1/q); Sigma <= extent I gives Q = G Sigma G^T + R <= Qb =
+// extent diag(1, 1/q) + R, hence v^T Q^-1 v >= v^T Qb^-1 v. With R diagonal, Qb is diagonal:
+// v_r^2 / (extent + R_rr) + v_b^2 q / (extent + q R_bb), where v_r = z[0] - r exactly and
+// |v_b| >= |sin v_b| = |direction x d| / r. With R not diagonal, the larger of the two terms
+// (each v_i^2 / Qb_ii <= v^T Qb^-1 v) is the bound. Rounding: a few ulps of either side, so a
+// caller that drops a candidate when the bound exceeds the gate by a relative 1e-6 drops only
+// what the exact gate would drop. REQUIRES: extent >= the largest eigenvalue, R SPD.
+inline double range_bearing_mahalanobis2_bound(const Eigen::Vector2d& sensor,
+                                               const Eigen::Vector2d& direction, double range,
+                                               double x, double y, double extent,
+                                               const Eigen::Matrix2d& r) {
+  const double dx = x - sensor[0];
+  const double dy = y - sensor[1];
+  const double q = dx * dx + dy * dy;
+  const double v_r = range - std::sqrt(q);
+  const double cross = direction[0] * dy - direction[1] * dx;
+  const double range_term = v_r * v_r / (extent + r(0, 0));
+  const double bearing_term = cross * cross / (extent + q * r(1, 1));
+  return r(0, 1) == 0.0 && r(1, 0) == 0.0 ? range_term + bearing_term
+                                          : std::max(range_term, bearing_term);
 }
 
 // The observation terms of z for landmark `lm` seen from pose `s` under `model`.

@@ -43,8 +43,10 @@
 // Costs (N entries, h = depth = O(log N) for points not closer than the minimum cell, B =
 // kLeafCapacity, W = 4^kLevelsPerNode):
 //   copy, move, size, empty: O(1), no allocation.
-//   within, in_footprint: O(h + k + boxes touched), no allocation; the footprint is the disc
-//     query filtered by bearing (boxes are pruned by distance only).
+//   within, within_reach, in_footprint: O(h + k + boxes touched), no allocation; the footprint
+//     is the disc query filtered by bearing (boxes are pruned by distance only; a dot product
+//     decides the bearing, atan2 only within 1e-9 of the edge); within_reach
+//     also skips the leaves its widest entry's reach misses.
 //   nearest: O(h + k log k) typically (branch and bound), no allocation.
 //   insert: O(h + B) plus a split (O(B) nodes at most); copies the shared nodes on its path.
 //   erase: O(h + B) plus a merge (O(B * W) when it happens); copies the shared nodes on its
@@ -69,9 +71,10 @@ namespace fastslam::memory {
 // One entry of the index: a landmark's slot and where the index stores it.
 struct SpatialEntry {
   Slot slot = 0;
-  // A number the caller keeps with the entry and gets back from queries; the index never reads
-  // it (it fills the padding after the slot: free). The engine keeps the landmark's largest
-  // covariance eigenvalue there, so that candidates can be gated without a map lookup.
+  // A number the caller keeps with the entry and gets back from queries (it fills the padding
+  // after the slot: free). The index reads it only to keep each leaf's widest entry (largest
+  // extent; NaN counts as widest) first, for within_reach. The engine keeps the landmark's
+  // largest covariance eigenvalue there, so that candidates can be gated without a map lookup.
   float extent = 0.0f;
   double x = 0.0;
   double y = 0.0;
@@ -174,6 +177,33 @@ class BasicSpatialIndex {
   // rounding margin, lies inside its square; otherwise from the root.
   template <class Visit>
   void within(const Subtree& from, double x, double y, double radius, Visit&& visit) const;
+
+  // As within(from, x, y, radius, visit), restricted to the entries whose own reach covers
+  // (x, y): visit(e) for every entry with d2 <= radius^2 and !(d2 > reach2(e.extent)), where
+  // d2 = (e.x - x)^2 + (e.y - y)^2 as for within, in no particular order. `reach2(float)` is a
+  // squared distance, non-decreasing in the extent, and NaN or above every other value for a
+  // NaN extent (NaN reaches everywhere, as !(d2 > NaN) says). A leaf whose
+  // square lies farther than its widest entry's reach is skipped whole, which is the gain when
+  // most extents are far below the one that sized `radius` (the engine's candidate discs: a
+  // radius from the map-wide variance bound, a reach from each landmark's own).
+  template <class Reach2, class Visit>
+  void within_reach(const Subtree& from, double x, double y, double radius, const Reach2& reach2,
+                    Visit&& visit) const;
+
+  // A disc of a batch query: centre and radius (finite, radius >= 0).
+  struct Disc {
+    double x = 0.0;
+    double y = 0.0;
+    double radius = 0.0;
+  };
+  // Many within_reach queries in one descent: visit(k, e) for every k < discs.size() and every
+  // entry e that within_reach(from, discs[k].x, discs[k].y, discs[k].radius,
+  // [&](float extent) { return reach2(k, extent); }, ...) visits, in no particular order (the
+  // queries' hits interleave). A scan's discs share most of their nodes and leaves, so this
+  // loads each once instead of once per disc. REQUIRES: reach2(k, extent) as within_reach's.
+  template <class Reach2, class Visit>
+  void within_reach(const Subtree& from, std::span<const Disc> discs, const Reach2& reach2,
+                    Visit&& visit) const;
 
   // visit(const SpatialEntry&) for every entry inside the sensor footprint of a sensor at
   // (x, y) facing `heading` (radians): within `max_range`, and with a bearing off the heading
@@ -278,10 +308,29 @@ class BasicSpatialIndex {
   void shrink_root() noexcept;
 
   // `reach`: a radius at least the query's plus every rounding margin; only the children the
-  // square of half-side `reach` around (x, y) overlaps are tested.
-  template <class Visit>
+  // square of half-side `reach` around (x, y) overlaps are tested. `reach2`: AnyReach for
+  // within(), else within_reach()'s per-entry bound.
+  struct AnyReach {};
+  template <class Reach2, class Visit>
   static void within_node(const Node* node, const Cell& cell, double x, double y, double r2,
-                          double prune2, double reach, Visit& visit);
+                          double prune2, double reach, const Reach2& reach2, Visit& visit);
+  // The batch query's discs below `node` whose bit is set in `active` (at most 64 at a time).
+  struct DiscBounds {
+    double x;
+    double y;
+    double r2;
+    double prune2;
+  };
+  template <class Reach2, class Visit>
+  static void within_many_node(const Node* node, const Cell& cell, const DiscBounds* discs,
+                               std::size_t first, std::uint64_t active, const Reach2& reach2,
+                               Visit& visit);
+  // Whether extent a ranks before b in a leaf (larger; NaN before any number).
+  static bool wider(float a, float b) noexcept { return a > b || (a != a && b == b); }
+  // Puts the leaf's widest entry first (O(count)), after any change but an append.
+  static void widest_first(Node* leaf) noexcept;
+  // The same after appending one entry to a leaf whose widest entry was first (O(1)).
+  static void appended(Node* leaf) noexcept;
   template <class Visit>
   static void for_each_node(const Node* node, Visit& visit);
   struct Best;  // nearest(): the running k best, a max-heap on distance

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <new>
 #include <numbers>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -233,6 +234,7 @@ auto BasicSpatialIndex<P>::build(SpatialEntry* first, SpatialEntry* last, const 
     Node* leaf = make_leaf(capacity);
     std::memcpy(static_cast<void*>(entries(leaf)), first, n * sizeof(SpatialEntry));
     leaf->count = static_cast<std::uint32_t>(n);
+    widest_first(leaf);
     return leaf;
   }
   Inner* inner = make_inner();
@@ -259,6 +261,29 @@ auto BasicSpatialIndex<P>::build(SpatialEntry* first, SpatialEntry* last, const 
     throw;
   }
   return inner;
+}
+
+template <class P>
+void BasicSpatialIndex<P>::widest_first(Node* leaf) noexcept {
+  SpatialEntry* e = entries(leaf);
+  std::uint32_t widest = 0;
+  for (std::uint32_t i = 1; i < leaf->count; ++i) {
+    if (wider(e[i].extent, e[widest].extent)) {
+      widest = i;
+    }
+  }
+  if (widest != 0) {
+    std::swap(e[0], e[widest]);
+  }
+}
+
+template <class P>
+void BasicSpatialIndex<P>::appended(Node* leaf) noexcept {
+  SpatialEntry* e = entries(leaf);
+  const std::uint32_t last = leaf->count - 1;
+  if (last != 0 && wider(e[last].extent, e[0].extent)) {
+    std::swap(e[0], e[last]);
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -369,6 +394,7 @@ void BasicSpatialIndex<P>::insert(Slot slot, double x, double y, float extent) {
     leaf = own(leaf);
     *link = leaf;
     entries(leaf)[leaf->count++] = entry;
+    appended(leaf);
   } else if (can_split(cell)) {
     // A full leaf becomes a subtree. It holds kLeafCapacity entries, unless it grew at the
     // finest size and became the root whose square then grew (rare: then a vector).
@@ -394,6 +420,7 @@ void BasicSpatialIndex<P>::insert(Slot slot, double x, double y, float extent) {
                 std::size_t{leaf->count} * sizeof(SpatialEntry));
     bigger->count = leaf->count;
     entries(bigger)[bigger->count++] = entry;
+    appended(bigger);
     release(leaf, *heap_);
     *link = bigger;
   }
@@ -454,6 +481,9 @@ void BasicSpatialIndex<P>::erase_existing(Slot slot, double x, double y) {
     ++i;
   }
   e[i] = e[--leaf->count];
+  if (i == 0) {
+    widest_first(leaf);
+  }
   for (unsigned k = 0; k < depth; ++k) {
     --path[k]->count;
   }
@@ -619,6 +649,11 @@ void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double 
     e[i].x = to_x;  // same leaf: in place
     e[i].y = to_y;
     e[i].extent = extent;
+    if (i == 0) {
+      widest_first(*link);
+    } else if (wider(extent, e[0].extent)) {
+      std::swap(e[0], e[i]);
+    }
     return;
   }
   insert(slot, to_x, to_y, extent);
@@ -660,16 +695,28 @@ void BasicSpatialIndex<P>::for_each(Visit&& visit) const {
 }
 
 template <class P>
-template <class Visit>
+template <class Reach2, class Visit>
 void BasicSpatialIndex<P>::within_node(const Node* node, const Cell& cell, double x, double y,
-                                       double r2, double prune2, double reach, Visit& visit) {
+                                       double r2, double prune2, double reach, const Reach2& reach2,
+                                       Visit& visit) {
   if (node->leaf()) {
     const SpatialEntry* e = entries(node);
-    for (std::uint32_t i = 0; i < node->count; ++i) {
-      const double dx = e[i].x - x;
-      const double dy = e[i].y - y;
-      if (dx * dx + dy * dy <= r2) {
-        visit(e[i]);
+    if constexpr (std::is_same_v<Reach2, AnyReach>) {
+      for (std::uint32_t i = 0; i < node->count; ++i) {
+        const double dx = e[i].x - x;
+        const double dy = e[i].y - y;
+        if (dx * dx + dy * dy <= r2) {
+          visit(e[i]);
+        }
+      }
+    } else {
+      for (std::uint32_t i = 0; i < node->count; ++i) {
+        const double dx = e[i].x - x;
+        const double dy = e[i].y - y;
+        const double d2 = dx * dx + dy * dy;
+        if (d2 <= r2 && !(d2 > reach2(e[i].extent))) {
+          visit(e[i]);
+        }
       }
     }
     return;
@@ -701,17 +748,27 @@ void BasicSpatialIndex<P>::within_node(const Node* node, const Cell& cell, doubl
         continue;
       }
       const Cell sub = child_cell(cell, i);
-      if (box_distance2(sub, x, y) > prune2) {
+      const double box2 = box_distance2(sub, x, y);
+      if (box2 > prune2) {
         continue;
       }
-      // A square wholly inside the disc (with a margin for rounding) needs no per-entry test.
-      const double fx = std::max(std::fabs(sub.x - x), std::fabs(sub.x + sub.side - x));
-      const double fy = std::max(std::fabs(sub.y - y), std::fabs(sub.y + sub.side - y));
-      if (fx * fx + fy * fy <= r2 * (1.0 - 0x1p-40)) {
-        for_each_node(child, visit);
-      } else {
-        within_node(child, sub, x, y, r2, prune2, reach, visit);
+      if constexpr (std::is_same_v<Reach2, AnyReach>) {
+        // A square wholly inside the disc (with a margin for rounding) needs no per-entry test.
+        const double fx = std::max(std::fabs(sub.x - x), std::fabs(sub.x + sub.side - x));
+        const double fy = std::max(std::fabs(sub.y - y), std::fabs(sub.y + sub.side - y));
+        if (fx * fx + fy * fy <= r2 * (1.0 - 0x1p-40)) {
+          for_each_node(child, visit);
+          continue;
+        }
+      } else if (child->leaf() && child->count != 0) {
+        // The leaf's widest entry comes first: when even its reach (with the pruning's
+        // rounding margin) falls short of the square, so does every entry's.
+        const double widest2 = reach2(entries(child)[0].extent);
+        if (box2 > widest2 + std::fabs(widest2) * 0x1p-40) {
+          continue;
+        }
       }
+      within_node(child, sub, x, y, r2, prune2, reach, reach2, visit);
     }
   }
 }
@@ -729,7 +786,7 @@ void BasicSpatialIndex<P>::within(double x, double y, double radius, Visit&& vis
   }
   // sqrt(prune2) rounds to within an ulp of the pruning radius; the relative 2^-30 covers it.
   const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
-  within_node(root_, root_cell_, x, y, r2, prune2, reach, visit);
+  within_node(root_, root_cell_, x, y, r2, prune2, reach, AnyReach{}, visit);
 }
 
 template <class P>
@@ -768,6 +825,13 @@ template <class P>
 template <class Visit>
 void BasicSpatialIndex<P>::within(const Subtree& from, double x, double y, double radius,
                                   Visit&& visit) const {
+  within_reach(from, x, y, radius, AnyReach{}, visit);
+}
+
+template <class P>
+template <class Reach2, class Visit>
+void BasicSpatialIndex<P>::within_reach(const Subtree& from, double x, double y, double radius,
+                                        const Reach2& reach2, Visit&& visit) const {
   if (root_ == nullptr) {
     return;
   }
@@ -784,11 +848,112 @@ void BasicSpatialIndex<P>::within(const Subtree& from, double x, double y, doubl
     if (x - reach - margin >= from.x_ && x + reach + margin < from.x_ + from.side_ &&
         y - reach - margin >= from.y_ && y + reach + margin < from.y_ + from.side_) {
       const Cell cell{from.x_, from.y_, from.side_, from.level_};
-      within_node(static_cast<const Node*>(from.node_), cell, x, y, r2, prune2, reach, visit);
+      within_node(static_cast<const Node*>(from.node_), cell, x, y, r2, prune2, reach, reach2,
+                  visit);
       return;
     }
   }
-  within(x, y, radius, visit);
+  const double r2 = radius * radius;
+  const double prune2 = r2 + r2 * 0x1p-40;
+  if (box_distance2(root_cell_, x, y) > prune2) {
+    return;
+  }
+  const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
+  within_node(root_, root_cell_, x, y, r2, prune2, reach, reach2, visit);
+}
+
+template <class P>
+template <class Reach2, class Visit>
+void BasicSpatialIndex<P>::within_many_node(const Node* node, const Cell& cell,
+                                            const DiscBounds* discs, std::size_t first,
+                                            std::uint64_t active, const Reach2& reach2,
+                                            Visit& visit) {
+  if (node->leaf()) {
+    const SpatialEntry* e = entries(node);
+    for (std::uint32_t i = 0; i < node->count; ++i) {
+      for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
+        const auto k = static_cast<unsigned>(std::countr_zero(bits));
+        const double dx = e[i].x - discs[k].x;
+        const double dy = e[i].y - discs[k].y;
+        const double d2 = dx * dx + dy * dy;
+        if (d2 <= discs[k].r2 && !(d2 > reach2(first + k, e[i].extent))) {
+          visit(first + k, e[i]);
+        }
+      }
+    }
+    return;
+  }
+  const auto* inner = static_cast<const Inner*>(node);
+  for (unsigned i = 0; i < kWidth; ++i) {
+    const Node* child = inner->child[i];
+    if (child == nullptr) {
+      continue;
+    }
+    const Cell sub = child_cell(cell, i);
+    const bool leaf = child->leaf() && child->count != 0;
+    std::uint64_t reached = 0;
+    for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
+      const auto k = static_cast<unsigned>(std::countr_zero(bits));
+      const double box2 = box_distance2(sub, discs[k].x, discs[k].y);
+      if (box2 > discs[k].prune2) {
+        continue;
+      }
+      if (leaf) {
+        // As within_node: the leaf's widest entry first, and no entry reaches farther.
+        const double widest2 = reach2(first + k, entries(child)[0].extent);
+        if (box2 > widest2 + std::fabs(widest2) * 0x1p-40) {
+          continue;
+        }
+      }
+      reached |= std::uint64_t{1} << k;
+    }
+    if (reached != 0) {
+      within_many_node(child, sub, discs, first, reached, reach2, visit);
+    }
+  }
+}
+
+template <class P>
+template <class Reach2, class Visit>
+void BasicSpatialIndex<P>::within_reach(const Subtree& from, std::span<const Disc> discs,
+                                        const Reach2& reach2, Visit&& visit) const {
+  if (root_ == nullptr) {
+    return;
+  }
+  // In groups of 64 (one bit each); per group, the discs inside `from`'s square (as
+  // within(from, ...) decides it) descend from there, the others from the root.
+  for (std::size_t first = 0; first < discs.size(); first += 64) {
+    const std::size_t n = std::min<std::size_t>(64, discs.size() - first);
+    std::array<DiscBounds, 64> bounds;
+    std::uint64_t inside = 0;
+    std::uint64_t outside = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const Disc& d = discs[first + k];
+      const double r2 = d.radius * d.radius;
+      const double prune2 = r2 + r2 * 0x1p-40;
+      bounds[k] = {d.x, d.y, r2, prune2};
+      bool in_from = false;
+      if (from.node_ != nullptr) {
+        const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
+        const double margin = 0x1p-30 * (std::fabs(d.x) + std::fabs(d.y) + reach);
+        in_from = d.x - reach - margin >= from.x_ && d.x + reach + margin < from.x_ + from.side_ &&
+                  d.y - reach - margin >= from.y_ && d.y + reach + margin < from.y_ + from.side_;
+      }
+      if (in_from) {
+        inside |= std::uint64_t{1} << k;
+      } else if (box_distance2(root_cell_, d.x, d.y) <= prune2) {
+        outside |= std::uint64_t{1} << k;
+      }
+    }
+    if (inside != 0) {
+      const Cell cell{from.x_, from.y_, from.side_, from.level_};
+      within_many_node(static_cast<const Node*>(from.node_), cell, bounds.data(), first, inside,
+                       reach2, visit);
+    }
+    if (outside != 0) {
+      within_many_node(root_, root_cell_, bounds.data(), first, outside, reach2, visit);
+    }
+  }
 }
 
 template <class P>
@@ -801,9 +966,27 @@ void BasicSpatialIndex<P>::in_footprint(double x, double y, double heading, doub
     return;
   }
   const double half = 0.5 * field_of_view;
+  // Most entries are clearly inside or outside: the cosine of their angle off the heading,
+  // (d . u) / |d|, against cos(half), decides them without trigonometry when the two differ by
+  // more than 1e-9, far above the rounding of either way (a few ulps). Entries in the band
+  // between (on the edge, or too close to the sensor for |d| to be exact) take the exact test.
+  const double ux = std::cos(heading);
+  const double uy = std::sin(heading);
+  const double cos_half = std::cos(half);
   within(x, y, max_range, [&](const SpatialEntry& e) {
     const double dx = e.x - x;
     const double dy = e.y - y;
+    const double norm = std::sqrt(dx * dx + dy * dy);
+    if (norm > 0x1p-500) {
+      const double gap = dx * ux + dy * uy - cos_half * norm;
+      if (gap > 1e-9 * norm) {
+        visit(e);
+        return;
+      }
+      if (gap < -1e-9 * norm) {
+        return;
+      }
+    }
     if ((dx == 0.0 && dy == 0.0) ||
         std::fabs(std::remainder(std::atan2(dy, dx) - heading, kTwoPi)) <= half) {
       visit(e);

@@ -2,7 +2,8 @@
 //  - maximum likelihood: on random scans, the result is valid (each landmark at most once, every
 //    choice a gated candidate at or above ln p0) and is exactly the greedy-stable assignment: no
 //    free pair (j, n) above ln p0 beats both j's choice and whoever took n; without conflicts it
-//    equals the per-observation argmax (brute force); the order candidates come in is irrelevant;
+//    equals the per-observation argmax (brute force); the order candidates come in is irrelevant,
+//    and so are the candidates below ln p0 (the filter drops them before the choice);
 //  - sampling: choice frequencies over many keyed streams match p_jn / (p0 + sum p) within 5
 //    binomial standard deviations; mutual exclusion holds; the weight is the log normaliser.
 #include "engine/association.h"
@@ -113,6 +114,34 @@ TEST(MaximumLikelihood, WithoutConflictsEqualsPerObservationArgmax) {
       EXPECT_EQ(assignment[j], best) << "trial " << trial << " observation " << j;
     }
   }
+}
+
+// The filter keeps no candidate below ln p0 under maximum likelihood (engine/filter.cc): the
+// choice and the weight must not depend on them, ties at ln p0 included.
+TEST(MaximumLikelihood, CandidatesBelowNewLandmarkNeverMatter) {
+  std::mt19937_64 rng(5);
+  const double log_p0 = -6.0;
+  int differ = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const std::uint32_t z = 1 + static_cast<std::uint32_t>(rng() % 8);
+    const std::uint32_t l = 1 + static_cast<std::uint32_t>(rng() % 8);
+    Candidates all = random_scan(rng, z, l, 0.5);
+    for (AssociationCandidate& c : all) {
+      if (rng() % 8 == 0) c.log_likelihood = log_p0;  // exactly at ln p0: kept
+    }
+    Candidates kept;
+    for (const AssociationCandidate& c : all) {
+      if (!(c.log_likelihood < log_p0)) kept.push_back(c);
+    }
+    differ += kept.size() != all.size() ? 1 : 0;
+    std::vector<std::int64_t> with_all(z);
+    std::vector<std::int64_t> with_kept(z);
+    const double w_all = associate_maximum_likelihood(all, log_p0, with_all);
+    const double w_kept = associate_maximum_likelihood(kept, log_p0, with_kept);
+    ASSERT_EQ(with_all, with_kept) << "trial " << trial;
+    ASSERT_EQ(w_all, w_kept) << "trial " << trial;
+  }
+  EXPECT_GT(differ, 1000);  // most scans had candidates below ln p0 to drop
 }
 
 TEST(MaximumLikelihood, StrongerObservationWinsAContestedLandmark) {

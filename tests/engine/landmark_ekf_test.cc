@@ -234,6 +234,66 @@ TEST(LandmarkEkfTest, InitialisationIsEquations69And70) {
   }
 }
 
+// The gate's lower bound from the mean and the largest eigenvalue alone never exceeds the exact
+// Mahalanobis distance (oracle: evaluate_observation), for innovations from ordinary to far
+// outside any gate, with and without a sensor offset, diagonal and correlated R; it is exact
+// for an isotropic covariance at zero bearing innovation, and drops most far candidates. The
+// log-likelihood is at most that of Q = R at the same distance.
+TEST(LandmarkEkfTest, MahalanobisBoundNeverExceedsTheExactDistance) {
+  std::mt19937_64 rng(31);
+  std::normal_distribution<double> n;
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  int far = 0;
+  int dropped = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    Scenario s = random_scenario(rng);
+    if (trial % 3 == 0) s.lm.cov = Eigen::Matrix2d::Identity() * std::exp(3.0 * n(rng));
+    if (trial % 5 == 0) s.r = random_cov(rng, 0.001, 0.3);  // correlated range and bearing noise
+    // Innovations from tiny to huge.
+    const double scale = std::exp(2.0 * n(rng));
+    s.z += Eigen::Vector2d(scale * n(rng), 0.1 * scale * n(rng));
+    s.z[0] = std::max(s.z[0], 0.5);
+    s.z[1] = wrap_angle(s.z[1]);
+    const Eigen::Vector2d sensor = s.model.sensor_position(s.pose);
+    const Eigen::Vector2d direction = (s.model.landmark_from(s.z, s.pose) - sensor) / s.z[0];
+    const double half_gap = 0.5 * (s.lm.cov(0, 0) - s.lm.cov(1, 1));
+    const double largest = 0.5 * (s.lm.cov(0, 0) + s.lm.cov(1, 1)) +
+                           std::sqrt(half_gap * half_gap + s.lm.cov(0, 1) * s.lm.cov(0, 1));
+    const double extent = trial % 2 == 0 ? largest : largest * (1.0 + 3.0 * unit(rng));
+    const double bound = range_bearing_mahalanobis2_bound(sensor, direction, s.z[0], s.lm.mean[0],
+                                                          s.lm.mean[1], extent, s.r);
+    const LandmarkObservation obs = evaluate_observation(s.model, s.lm, s.pose, s.z, s.r);
+    const double exact = obs.mahalanobis2;
+    ASSERT_LE(bound, exact * (1.0 + 1e-9) + 1e-12) << "trial " << trial;
+    // det Q >= det R, so ln N(v; 0, Q) <= -ln 2 pi - ln det R / 2 - m^2 / 2 (the filter's
+    // limit for candidates that maximum likelihood could take).
+    const double log_det_r = std::log(s.r(0, 0) * s.r(1, 1) - s.r(0, 1) * s.r(1, 0));
+    ASSERT_LE(obs.log_likelihood, -kLogTwoPi - 0.5 * log_det_r - 0.5 * exact + 1e-9)
+        << "trial " << trial;
+    if (exact > 2.0 * 23.0) {
+      ++far;
+      dropped += bound > 23.0 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(far, 2000);
+  EXPECT_GT(dropped, far / 2) << "the bound should drop most candidates far outside the gate";
+  // Tight: an isotropic covariance, the observation straight at the landmark (no bearing
+  // innovation, so the sine is exact), diagonal R.
+  const RangeBearingModel model(SensorOffset{3.78, 0.5, 0.0});
+  const Pose pose(10.0, -4.0, 0.7);
+  LandmarkGaussian lm;
+  lm.mean = model.landmark_from({25.0, 0.3}, pose);
+  lm.cov = Eigen::Matrix2d::Identity() * 0.4;
+  Eigen::Matrix2d r;
+  r << 0.25, 0.0, 0.0, 0.0009;
+  const Eigen::Vector2d z(27.5, 0.3);
+  const Eigen::Vector2d sensor = model.sensor_position(pose);
+  const double bound = range_bearing_mahalanobis2_bound(
+      sensor, (model.landmark_from(z, pose) - sensor) / z[0], z[0], lm.mean[0], lm.mean[1], 0.4, r);
+  EXPECT_NEAR(bound, evaluate_observation(model, lm, pose, z, r).mahalanobis2, 1e-9);
+  EXPECT_NEAR(bound, 2.5 * 2.5 / (0.4 + 0.25), 1e-9);
+}
+
 TEST(LandmarkEkfTest, CheckCovarianceRefusesBadMatrices) {
   Eigen::Matrix2d good;
   good << 1.0, 0.5, 0.5, 1.0;

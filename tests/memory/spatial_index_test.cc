@@ -1,4 +1,5 @@
-// The spatial index against brute force: every query (within, in_footprint, nearest, for_each)
+// The spatial index against brute force: every query (within, within_reach alone and in
+// batches, in_footprint, nearest, for_each)
 // over random maps (uniform, clustered, duplicates, points on cell boundaries, huge
 // coordinates), through inserts, small and large moves and removals, after copies that each
 // change differently (one oracle per handle), resampling-style gathers and growth of the root;
@@ -62,6 +63,19 @@ std::vector<SpatialEntry> brute_within(const Oracle& oracle, double x, double y,
   std::vector<SpatialEntry> out;
   for (const SpatialEntry& e : oracle) {
     if (d2(e, x, y) <= r * r) {
+      out.push_back(e);
+    }
+  }
+  return sorted(out);
+}
+
+// within_reach's oracle: within r, and within the entry's own reach a * extent + b.
+std::vector<SpatialEntry> brute_within_reach(const Oracle& oracle, double x, double y, double r,
+                                             double a, double b) {
+  std::vector<SpatialEntry> out;
+  for (const SpatialEntry& e : oracle) {
+    const double dist2 = d2(e, x, y);
+    if (dist2 <= r * r && !(dist2 > a * static_cast<double>(e.extent) + b)) {
       out.push_back(e);
     }
   }
@@ -153,7 +167,8 @@ template <class Index>
       }
       const double half = (q % 7 == 3) ? 0.0 : query.r + pad;
       const auto from = index.covering(bx - half, by - half, bx + half, by + half);
-      if (!oracle.empty() && from.empty() && std::fabs(bx) + half < 1.0) {
+      // (The root's square always holds [-16, 16)^2.)
+      if (!oracle.empty() && from.empty() && std::max(std::fabs(bx), std::fabs(by)) + half < 1.0) {
         return ::testing::AssertionFailure() << "covering a box near the origin is empty";
       }
       std::vector<SpatialEntry> from_root;
@@ -167,6 +182,62 @@ template <class Index>
                << "within(subtree of side " << from.side() << ", " << query.x << ", " << query.y
                << ", " << query.r << "): " << from_node.size() << " entries, from the root "
                << from_root.size() << " (or in another order)";
+      }
+      // Each entry's own reach a * extent + b (extents 0 .. ~2000): from none to all of the
+      // disc, from this subtree and from the root (an empty subtree).
+      const double r2 = query.r * query.r;
+      const double scales[] = {0.0, 1e-4, 1e-3, 1.0};
+      const double a = r2 * scales[rng() % std::size(scales)] * unit(rng);
+      const double b = (q % 3 == 1) ? 0.0 : r2 * 0.2 * unit(rng);
+      const auto reach2 = [a, b](float e) { return a * static_cast<double>(e) + b; };
+      const std::vector<SpatialEntry> expected =
+          brute_within_reach(oracle, query.x, query.y, query.r, a, b);
+      for (const auto& start : {from, typename Index::Subtree()}) {
+        std::vector<SpatialEntry> reached;
+        index.within_reach(start, query.x, query.y, query.r, reach2,
+                           [&](const SpatialEntry& e) { reached.push_back(e); });
+        if (sorted(reached) != expected) {
+          return ::testing::AssertionFailure()
+                 << "within_reach(subtree of side " << start.side() << ", " << query.x << ", "
+                 << query.y << ", " << query.r << ", " << a << " * extent + " << b
+                 << "): " << reached.size() << " entries, brute force " << expected.size();
+        }
+      }
+      // A batch: this disc and others around it (some far, some beyond the subtree), up to 70
+      // (two groups of 64), each with its own reach; every disc's hits as its own query's.
+      if (q % 4 == 2) {
+        using Disc = typename Index::Disc;
+        const std::size_t count = (q % 16 == 2) ? 70 : rng() % 9;
+        std::vector<Disc> discs;
+        std::vector<std::pair<double, double>> reach;
+        for (std::size_t k = 0; k < count; ++k) {
+          const double spread = (k % 5 == 4) ? 3.0 * extent : 2.0 * half + 1.0;
+          const double radius = radii[rng() % std::size(radii)] * unit(rng);
+          discs.push_back(
+              {query.x + spread * (unit(rng) - 0.5), query.y + spread * (unit(rng) - 0.5), radius});
+          const double rk2 = radius * radius;
+          reach.emplace_back(rk2 * scales[rng() % std::size(scales)] * unit(rng),
+                             (k % 3 == 1) ? 0.0 : rk2 * 0.2 * unit(rng));
+        }
+        for (const auto& start : {from, typename Index::Subtree()}) {
+          std::vector<std::vector<SpatialEntry>> hits(count);
+          index.within_reach(
+              start, std::span<const Disc>(discs),
+              [&](std::size_t k, float e) {
+                return reach[k].first * static_cast<double>(e) + reach[k].second;
+              },
+              [&](std::size_t k, const SpatialEntry& e) { hits.at(k).push_back(e); });
+          for (std::size_t k = 0; k < count; ++k) {
+            const std::vector<SpatialEntry> want = brute_within_reach(
+                oracle, discs[k].x, discs[k].y, discs[k].radius, reach[k].first, reach[k].second);
+            if (sorted(hits[k]) != want) {
+              return ::testing::AssertionFailure()
+                     << "batch within_reach, disc " << k << " of " << count << " (" << discs[k].x
+                     << ", " << discs[k].y << ", " << discs[k].radius << "): " << hits[k].size()
+                     << " entries, brute force " << want.size();
+            }
+          }
+        }
       }
     }
     const double heading = (unit(rng) - 0.5) * 4.0 * std::numbers::pi;
@@ -259,7 +330,7 @@ void random_change(Index& index, Oracle& oracle, Kind kind, Slot& next_slot,
   const unsigned op = static_cast<unsigned>(rng() % 10);
   if (oracle.empty() || op < 3) {
     const auto [x, y] = random_point(kind, rng);
-    const auto extent = static_cast<float>(rng() % 1000);  // carried, never read by the index
+    const auto extent = static_cast<float>(rng() % 1000);
     index.insert(next_slot, x, y, extent);
     oracle.push_back({next_slot++, extent, x, y});
     return;
@@ -283,7 +354,9 @@ void random_change(Index& index, Oracle& oracle, Kind kind, Slot& next_slot,
   } else {
     std::tie(x, y) = random_point(kind, rng);
   }
-  const float extent = 0.5f * e.extent;  // an EKF update shrinks the landmark's covariance
+  // An EKF update shrinks the landmark's covariance; some grow, so that a leaf's widest entry
+  // also changes upwards (the index must not assume either).
+  const float extent = e.slot % 4 == 0 ? 2.0f * e.extent + 1.0f : 0.5f * e.extent;
   index.move(e.slot, e.x, e.y, x, y, extent);
   e.x = x;
   e.y = y;
@@ -393,6 +466,56 @@ TYPED_TEST(SpatialIndexTest, GridQueriesExactlyOnTheRadius) {
                                                std::numbers::pi / 2));
       }
     }
+  }
+}
+
+// within_reach with NaN extents (reaching everywhere, as !(d2 > NaN)) and extents that rise and
+// fall in place: every entry of the disc whose reach covers the point, none other.
+TYPED_TEST(SpatialIndexTest, WithinReachFollowsExtentsInPlace) {
+  typename TestFixture::IndexType index(this->heap_);
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  struct Item {
+    Slot slot;
+    float extent;
+    double x;
+    double y;
+  };
+  std::vector<Item> items;
+  for (Slot s = 0; s < 400; ++s) {
+    items.push_back({s, static_cast<float>(unit(rng)), 200.0 * unit(rng), 200.0 * unit(rng)});
+    index.insert(s, items.back().x, items.back().y, items.back().extent);
+  }
+  const auto reach2 = [](float e) { return 400.0 * static_cast<double>(e); };  // 20 m at 1
+  for (int round = 0; round < 60; ++round) {
+    // Change extents in place (small moves stay in their leaves): up, down, to NaN and back.
+    for (int k = 0; k < 40; ++k) {
+      Item& it = items[rng() % items.size()];
+      const unsigned op = static_cast<unsigned>(rng() % 5);
+      const float extent = op == 0   ? std::numeric_limits<float>::quiet_NaN()
+                           : op == 1 ? 25.0f * static_cast<float>(unit(rng))
+                                     : 0.01f * static_cast<float>(unit(rng));
+      const double x = it.x + 1e-3 * (unit(rng) - 0.5);
+      index.move(it.slot, it.x, it.y, x, it.y, extent);
+      it.x = x;
+      it.extent = extent;
+    }
+    const double qx = 200.0 * unit(rng);
+    const double qy = 200.0 * unit(rng);
+    const double r = 80.0 * unit(rng);
+    std::set<Slot> expected;
+    for (const Item& it : items) {
+      const double dx = it.x - qx;
+      const double dy = it.y - qy;
+      const double dist2 = dx * dx + dy * dy;
+      if (dist2 <= r * r && !(dist2 > reach2(it.extent))) expected.insert(it.slot);
+    }
+    std::set<Slot> got;
+    const auto from = index.covering(qx - r, qy - r, qx + r, qy + r);
+    index.within_reach(from, qx, qy, r, reach2, [&](const SpatialEntry& e) {
+      EXPECT_TRUE(got.insert(e.slot).second) << "visited twice: " << e.slot;
+    });
+    ASSERT_EQ(got, expected) << "round " << round;
   }
 }
 
