@@ -89,6 +89,8 @@ void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "(default -87.1: the detector's scan-edge margin)");
   cmd.add_option("--vp-max-bearing-deg", w.vp_max_bearing_deg,
                  "victoria-park: detections left of this bearing are dropped, degrees (default 87.1)");
+  cmd.add_option("--vp-laser-yaw-deg", w.vp_laser_yaw_deg,
+                 "victoria-park: the laser's yaw on the car, degrees counter-clockwise (default 0)");
   cmd.add_option("--vp-max-diameter", gate.max_diameter,
                  "victoria-park: detections wider than this are dropped, m (default: no limit)")
       ->check(CLI::PositiveNumber);
@@ -306,6 +308,9 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   }
   if (given("--vp-max-bearing-deg")) {
     o.victoria_park.gate.max_bearing = w.vp_max_bearing_deg * std::numbers::pi / 180;
+  }
+  if (given("--vp-laser-yaw-deg")) {
+    o.victoria_park.laser_yaw = w.vp_laser_yaw_deg * std::numbers::pi / 180;
   }
   if (given("--initial-heading-deg")) {
     o.initial_heading = w.initial_heading_deg * std::numbers::pi / 180;

@@ -31,6 +31,7 @@ struct RunWords {
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
   double initial_heading_deg = 0;
   double vp_min_bearing_deg = 0, vp_max_bearing_deg = 0;  // given or not: the gate's defaults
+  double vp_laser_yaw_deg = 0;
   std::string config;  // --config FILE.json
 };
 

@@ -177,49 +177,6 @@ std::vector<TruthLandmark> truth_landmarks(const World& world) {
   return out;
 }
 
-// Where the source's pose (the point its log and its GPS refer to) is relative to the point the
-// filter tracks: zero, except without odometry on Victoria Park. There the log's state is the
-// laser's pose, 3.78 m ahead of the rear axle and 0.5 m left of it, and the laser does not move
-// along its heading when the car turns (its sideslip reaches ~40 deg in tight turns), which the
-// Brownian model (eq. 81: x += v cos(theta) dt) assumes; the rear axle's centre does. So the
-// filter tracks the axle, the sensor sits at (a, b) from it, and the trajectory is reported at
-// the laser again.
-engine::SensorOffset tracked_point_offset(const RunOptions& o, const LogHeader& h) {
-  if (o.motion != "none" || h.motion.kind != engine::MotionKind::kVictoriaPark) return {};
-  return {h.motion.geometry.a, h.motion.geometry.b, 0.0};
-}
-
-// The filter's configuration: the options' algorithm, particles, ...; the models of the
-// source's header; the noise overrides.
-engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
-  engine::FilterConfig config = o.filter;
-  config.record_trajectory = true;
-  config.motion = h.motion;
-  if (o.motion == "none") {
-    config.motion.kind = engine::MotionKind::kBrownian;
-    config.motion.sigma_control[0] = o.no_odometry_sigma[0];
-    config.motion.sigma_control[1] = o.no_odometry_sigma[1];
-  } else if (o.motion != "odometry") {
-    throw std::invalid_argument("--motion '" + o.motion + "' is not supported (odometry or none)");
-  }
-  config.sensor = h.sensor;
-  if (o.noise.sigma_range) config.sensor.sigma_range = *o.noise.sigma_range;
-  if (o.noise.sigma_bearing) config.sensor.sigma_bearing = *o.noise.sigma_bearing;
-  if (o.noise.sigma_control0) config.motion.sigma_control[0] = *o.noise.sigma_control0;
-  if (o.noise.sigma_control1) config.motion.sigma_control[1] = *o.noise.sigma_control1;
-  for (int k = 0; k < 5; ++k) config.initial_pose[k] = k < 3 ? h.start_pose[k] : 0.0;
-  if (o.initial_heading) config.initial_pose[2] = engine::wrap_angle(*o.initial_heading);
-  const engine::SensorOffset axle = tracked_point_offset(o, h);
-  if (axle.x != 0.0 || axle.y != 0.0) {
-    // The filter tracks the rear axle; the sensor (the source's pose) sits at `axle` from it.
-    config.sensor.offset = axle;
-    const double th = config.initial_pose[2];
-    config.initial_pose[0] -= axle.x * std::cos(th) - axle.y * std::sin(th);
-    config.initial_pose[1] -= axle.x * std::sin(th) + axle.y * std::cos(th);
-  }
-  return config;
-}
-
 // The estimate at time t: the last sample stamped exactly t, else the interpolation between
 // the samples around t when they are at most kMaxInterpolationGap apart. REQUIRES: samples in
 // time order.
@@ -455,6 +412,52 @@ void draw_map(const std::string& script, const std::string& out) {
 }
 
 }  // namespace
+
+// Where the source's pose (the point its log and its GPS refer to) is relative to the point the
+// filter tracks: zero, except without odometry on Victoria Park. There the log's state is the
+// laser's pose, 3.78 m ahead of the rear axle and 0.5 m left of it, and the laser does not move
+// along its heading when the car turns (its sideslip reaches ~40 deg in tight turns), which the
+// Brownian model (eq. 81: x += v cos(theta) dt) assumes; the rear axle's centre does. So the
+// filter tracks the axle, the sensor sits at (a, b) from it, and the trajectory is reported at
+// the laser again.
+engine::SensorOffset tracked_point_offset(const RunOptions& o, const LogHeader& h) {
+  if (o.motion != "none" || h.motion.kind != engine::MotionKind::kVictoriaPark) return {};
+  return {h.motion.geometry.a, h.motion.geometry.b, 0.0};
+}
+
+// The filter's configuration: the options' algorithm, particles, ...; the models of the
+// source's header; the noise overrides.
+engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
+  engine::FilterConfig config = o.filter;
+  config.record_trajectory = true;
+  config.motion = h.motion;
+  if (o.motion == "none") {
+    config.motion.kind = engine::MotionKind::kBrownian;
+    config.motion.sigma_control[0] = o.no_odometry_sigma[0];
+    config.motion.sigma_control[1] = o.no_odometry_sigma[1];
+  } else if (o.motion != "odometry") {
+    throw std::invalid_argument("--motion '" + o.motion + "' is not supported (odometry or none)");
+  }
+  config.sensor = h.sensor;
+  if (o.noise.sigma_range) config.sensor.sigma_range = *o.noise.sigma_range;
+  if (o.noise.sigma_bearing) config.sensor.sigma_bearing = *o.noise.sigma_bearing;
+  if (o.noise.sigma_control0) config.motion.sigma_control[0] = *o.noise.sigma_control0;
+  if (o.noise.sigma_control1) config.motion.sigma_control[1] = *o.noise.sigma_control1;
+  for (int k = 0; k < 5; ++k) config.initial_pose[k] = k < 3 ? h.start_pose[k] : 0.0;
+  if (o.initial_heading) config.initial_pose[2] = engine::wrap_angle(*o.initial_heading);
+  const engine::SensorOffset axle = tracked_point_offset(o, h);
+  if (axle.x != 0.0 || axle.y != 0.0) {
+    // The filter tracks the rear axle; the source's pose sits at `axle` from it (same heading),
+    // and the sensor at the header's offset from that.
+    const engine::SensorOffset& header = h.sensor.offset;
+    config.sensor.offset = {axle.x + header.x, axle.y + header.y, header.yaw};
+    const double th = config.initial_pose[2];
+    config.initial_pose[0] -= axle.x * std::cos(th) - axle.y * std::sin(th);
+    config.initial_pose[1] -= axle.x * std::sin(th) + axle.y * std::cos(th);
+  }
+  return config;
+}
+
 
 std::string default_plot_script() {
   if (const char* env = std::getenv("FASTSLAM_PLOT_SCRIPT"); env != nullptr) return env;

@@ -107,6 +107,15 @@ struct RunOptions {
 // source tree's tools/plot_run.py.
 std::string default_plot_script();
 
+// The filter's configuration for a source with header `h` under `options`: the header's
+// models and noises, the options' algorithm, particles, association, ... and noise overrides;
+// with `--motion none` the Brownian model, and on Victoria Park the rear axle tracked with the
+// laser at (a, b) from it plus the header's own sensor offset (`tracked_point_offset`).
+engine::FilterConfig filter_config(const RunOptions& options, const LogHeader& h);
+// Where the source's pose is relative to the point the filter tracks: zero, except without
+// odometry on Victoria Park ((a, b), the laser from the rear axle).
+engine::SensorOffset tracked_point_offset(const RunOptions& options, const LogHeader& h);
+
 // Runs any source (the name is historical) and returns the process exit code; throws
 // std::exception with a clear message on bad options or unreadable files.
 int run_simulation(const RunOptions& options);

@@ -38,6 +38,8 @@ void check_options(const VictoriaParkOptions& o) {
               g.max_bearing <= std::numbers::pi,
           "gate bearings must be finite with -pi <= min_bearing < max_bearing <= pi");
   require(g.max_diameter > 0, "gate max_diameter must be > 0 (infinity for no limit)");
+  require(std::isfinite(o.laser_yaw) && std::abs(o.laser_yaw) <= std::numbers::pi,
+          "laser_yaw must be finite and within [-pi, pi]");
   for (double s : {o.sigma_speed, o.sigma_steer, o.sigma_range, o.sigma_bearing}) {
     require(std::isfinite(s) && s > 0, "noises must be finite and > 0");
   }
@@ -223,7 +225,7 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
   // Negative information may only expect trees where the gate would keep them.
   h.sensor.field_of_view =
       2 * std::min(std::abs(options.gate.min_bearing), std::abs(options.gate.max_bearing));
-  h.sensor.offset = {};  // the state is the laser's pose
+  h.sensor.offset = {0.0, 0.0, options.laser_yaw};  // the state is the laser's pose
   // The pose holds from the first GPS fix, or from the first record if one comes earlier (the
   // first control's interval starts dt before its stamp).
   const Event& first = events.front();

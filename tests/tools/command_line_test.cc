@@ -214,6 +214,9 @@ TEST_F(CommandLine, VictoriaParkGateFlags) {
   EXPECT_DOUBLE_EQ(o.victoria_park.gate.min_bearing, -std::numbers::pi / 4);
   EXPECT_DOUBLE_EQ(o.victoria_park.gate.max_bearing, std::numbers::pi / 3);
   EXPECT_EQ(o.victoria_park.gate.max_diameter, 0.9);
+  EXPECT_EQ(o.victoria_park.laser_yaw, 0.0);
+  EXPECT_DOUBLE_EQ(run("{}", "--vp-laser-yaw-deg -0.5").victoria_park.laser_yaw,
+                   -0.5 * std::numbers::pi / 180);
   EXPECT_NE(error_of("{}", "--vp-max-diameter 0").find("--vp-max-diameter"), std::string::npos);
   EXPECT_NE(error_of("{}", "--vp-min-range -1").find("--vp-min-range"), std::string::npos);
 }

@@ -383,6 +383,38 @@ TEST(RunCommand, StartHeadingOverrideAndTheAlignedGpsError) {
 // log's pose) at (a, b) from it, and reports the laser again. With zero noise and the car at
 // rest the laser must stay exactly at the start, whatever the heading (a wrong sign or a
 // missing conversion moves it by up to 2 sqrt(a^2 + b^2) = 7.6 m).
+// Without odometry on Victoria Park the filter tracks the rear axle: the sensor offset is the
+// laser's place from the axle plus the header's own offset (a laser yaw survives), and the start
+// moves back to the axle; with odometry the header's offset is used as it is.
+TEST(RunCommand, FilterConfigComposesTheAxleWithTheHeadersOffset) {
+  LogHeader h;
+  h.motion.kind = engine::MotionKind::kVictoriaPark;
+  h.motion.geometry.a = 3.78;
+  h.motion.geometry.b = 0.5;
+  h.sensor.offset = {0.0, 0.0, -0.01};
+  h.start_pose[0] = 10.0;
+  h.start_pose[1] = 20.0;
+  h.start_pose[2] = std::numbers::pi / 2;
+  RunOptions o;
+  engine::FilterConfig c = filter_config(o, h);
+  EXPECT_EQ(c.motion.kind, engine::MotionKind::kVictoriaPark);
+  EXPECT_EQ(c.sensor.offset.x, 0.0);
+  EXPECT_EQ(c.sensor.offset.yaw, -0.01);
+  EXPECT_EQ(c.initial_pose[0], 10.0);
+  o.motion = "none";
+  c = filter_config(o, h);
+  EXPECT_EQ(c.motion.kind, engine::MotionKind::kBrownian);
+  EXPECT_EQ(c.sensor.offset.x, 3.78);
+  EXPECT_EQ(c.sensor.offset.y, 0.5);
+  EXPECT_EQ(c.sensor.offset.yaw, -0.01);
+  // Heading pi/2: the axle is 3.78 m behind (-y) and 0.5 m right (+x) of the laser.
+  EXPECT_NEAR(c.initial_pose[0], 10.5, 1e-12);
+  EXPECT_NEAR(c.initial_pose[1], 20.0 - 3.78, 1e-12);
+  const engine::SensorOffset axle = tracked_point_offset(o, h);
+  EXPECT_EQ(axle.x, 3.78);
+  EXPECT_EQ(axle.yaw, 0.0);
+}
+
 TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
   Log log;
   log.header.motion.kind = engine::MotionKind::kVictoriaPark;

@@ -178,6 +178,11 @@ TEST_F(VictoriaParkFiles, GateAndHeadingAreOptions) {
   options.gate.max_diameter = 0.0;
   EXPECT_THROW(read_victoria_park(dir_, options), std::invalid_argument);
   options.gate.max_diameter = 1.0;
+  options.laser_yaw = -0.01;
+  EXPECT_EQ(read_victoria_park(dir_, options).log.header.sensor.offset.yaw, -0.01);
+  options.laser_yaw = 4.0;
+  EXPECT_THROW(read_victoria_park(dir_, options), std::invalid_argument);
+  options.laser_yaw = 0.0;
   options.gate.min_range = 90.0;
   EXPECT_THROW(read_victoria_park(dir_, options), std::invalid_argument);
   options = {};
