@@ -806,6 +806,8 @@ struct Filter::Impl {
       const parallel::ResampleOutcome outcome =
           resampler.resample(store, config.seed, scan_step, grain);
       resamples += outcome.resampled ? 1 : 0;
+      // The weights summed to one after the last scan, so their sum now is this scan's factor.
+      log_evidence += outcome.before.log_sum;
       if (outcome.resampled && carries_velocity_cov()) {
         // FastSLAM 2.0 without odometry: the velocities' covariance outlives the scan
         // (draw_state), so it follows its particle to the descendants.
@@ -826,6 +828,7 @@ struct Filter::Impl {
       // hold it; start the weights afresh rather than stop (counted in the statistics).
       parallel::reset_log_weights(store.log_weight(), kernel);
       ++weight_resets;
+      log_evidence = -std::numeric_limits<double>::infinity();
     }
     resample_seconds += seconds_between(t0, Clock::now());
   }
@@ -910,6 +913,7 @@ struct Filter::Impl {
   std::uint64_t step = 0;  // events so far (controls and scans): keys the random streams
   std::uint64_t controls = 0, scans = 0, observations = 0, resamples = 0, weight_resets = 0;
   double resample_seconds = 0.0;
+  double log_evidence = 0.0;
   double observe_wall_seconds = 0.0;
   mutable tbb::combinable<PhaseTimes> phase_times;  // combine_each is not const
 };
@@ -1117,6 +1121,7 @@ FilterStatistics Filter::statistics() const {
     st.landmarks_removed += t.removed;
   });
   st.resample_seconds = s.resample_seconds;
+  st.log_evidence = s.log_evidence;
   st.observe_wall_seconds = s.observe_wall_seconds;
   const memory::HeapStats heap = s.heap.stats();
   st.live_nodes = heap.live_nodes;

@@ -115,6 +115,12 @@ struct FilterStatistics {
   // started by observations, and removed by negative information.
   std::uint64_t landmarks_created = 0;
   std::uint64_t landmarks_removed = 0;
+  // ln p(z_1..t | u_1..t), the filter's estimate of the data's likelihood under its models: the
+  // sum over scans of ln sum_i w_i l_i (w the normalised weights before the scan, l_i particle
+  // i's weight factor; new landmarks count ln p0). Compares settings (noises, a sensor offset)
+  // on the same data without ground truth. -inf after a scan every particle found impossible.
+  // Since construction (or load).
+  double log_evidence = 0.0;
   // The node heap: live tree nodes and bytes of all maps together.
   std::int64_t live_nodes = 0;
   std::int64_t live_bytes = 0;

@@ -634,6 +634,7 @@ int run_simulation(const RunOptions& options) {
         {"update", stats.update_seconds},
         {"resample", stats.resample_seconds}}},
       {"resamples", stats.resamples},
+      {"log_evidence", stats.log_evidence},
       {"live_tree_nodes", stats.live_nodes},
       {"live_tree_bytes", stats.live_bytes},
       {"peak_rss_bytes", peak_rss_bytes()},

@@ -862,6 +862,7 @@ TEST(FilterWeightTest, FastSlam1MatchesEq31AndDenseEkf) {
   filter.predict({3.0, -0.1}, 0.1);
   filter.predict({3.0, -0.05}, 0.1);
   const Snapshot before = snapshot(filter);
+  const double evidence_before = filter.statistics().log_evidence;
   // Step 5: landmarks 2 and 0 again (in that order) and 7 for the first time.
   const std::vector<Observation> scan =
       observe_from({2.6, 2.2, 0.3}, {kTestLandmarks[2], kTestLandmarks[0], kTestLandmarks[3]});
@@ -907,6 +908,10 @@ TEST(FilterWeightTest, FastSlam1MatchesEq31AndDenseEkf) {
                 *std::min_element(increments.begin(), increments.end()),
             0.1);
   const double log_sum = log_sum_exp(unnormalised);
+  // The evidence grew by this scan's factor: ln sum_i w_i exp(increment_i), w normalised.
+  EXPECT_NEAR(filter.statistics().log_evidence - evidence_before,
+              log_sum - log_sum_exp(before.columns[5]), 1e-9);
+  EXPECT_TRUE(std::isfinite(evidence_before));
   for (std::size_t i = 0; i < config.particles; ++i) {
     EXPECT_NEAR(after.columns[5][i], unnormalised[i] - log_sum, 1e-9) << "particle " << i;
   }
