@@ -43,8 +43,8 @@
 // Costs (M particles, K queued controls, Z observations in the scan, N landmarks per map, k
 // candidates and landmarks in view per particle): `predict` O(1) amortised; `observe`
 // O(M (K + Z log N)) work with known ids, O(M (K + (Z + k) log N + Z k)) unknown, spread over
-// the threads, plus resampling O(M); `estimate` O(M + N) (it copies the best map out); `save` O(M N) worst case
-// (maps that share a root are written once).
+// the threads, plus resampling O(M); `estimate` O(M + N) (it copies the best map out); `save` O(M
+// N) worst case (maps that share a root are written once).
 #pragma once
 
 #include <cstdint>

@@ -87,10 +87,12 @@ void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--vp-min-bearing-deg", w.vp_min_bearing_deg,
                  "victoria-park: detections right of this bearing are dropped, degrees "
                  "(default -87.1: the detector's scan-edge margin)");
-  cmd.add_option("--vp-max-bearing-deg", w.vp_max_bearing_deg,
-                 "victoria-park: detections left of this bearing are dropped, degrees (default 87.1)");
-  cmd.add_option("--vp-laser-yaw-deg", w.vp_laser_yaw_deg,
-                 "victoria-park: the laser's yaw on the car, degrees counter-clockwise (default 0)");
+  cmd.add_option(
+      "--vp-max-bearing-deg", w.vp_max_bearing_deg,
+      "victoria-park: detections left of this bearing are dropped, degrees (default 87.1)");
+  cmd.add_option(
+      "--vp-laser-yaw-deg", w.vp_laser_yaw_deg,
+      "victoria-park: the laser's yaw on the car, degrees counter-clockwise (default 0)");
   cmd.add_option("--vp-max-diameter", gate.max_diameter,
                  "victoria-park: detections wider than this are dropped, m (default: no limit)")
       ->check(CLI::PositiveNumber);

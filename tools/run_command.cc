@@ -458,7 +458,6 @@ engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
   return config;
 }
 
-
 std::string default_plot_script() {
   if (const char* env = std::getenv("FASTSLAM_PLOT_SCRIPT"); env != nullptr) return env;
   return FASTSLAM_PLOT_RUN_SCRIPT;

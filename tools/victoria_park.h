@@ -47,10 +47,10 @@ namespace fastslam::tools {
 // - diameter: no limit. The detector keeps segments under 1 m end to end, so every detection
 //   is at most about 1.1 m across; a lower limit drops the widest (bushes, groups of trunks).
 struct VictoriaParkGate {
-  double min_range = 5.0;                                       // m
-  double max_range = 70.0;                                      // m
-  double min_bearing = -(90.0 - 2.9) * std::numbers::pi / 180;  // rad, vehicle frame
-  double max_bearing = (90.0 - 2.9) * std::numbers::pi / 180;   // rad
+  double min_range = 5.0;                                         // m
+  double max_range = 70.0;                                        // m
+  double min_bearing = -(90.0 - 2.9) * std::numbers::pi / 180;    // rad, vehicle frame
+  double max_bearing = (90.0 - 2.9) * std::numbers::pi / 180;     // rad
   double max_diameter = std::numeric_limits<double>::infinity();  // m
 };
 

@@ -417,8 +417,8 @@ TEST_P(FilterDeterminismTest, BitIdenticalForAnyThreadCountAndGrain) {
   // split_seconds 0: every pass counts as heavy and is split across the threads whatever the
   // grain (as Victoria Park's are); infinity: never.
   const std::tuple<unsigned, std::size_t, double> layouts[] = {
-      {1, 1, kInf}, {2, 1, kInf}, {2, 3, kInf}, {2, 16, kInf}, {2, 1000, kInf}, {2, 1000, 0.0},
-      {1, 1000, 0.0}};
+      {1, 1, kInf},    {2, 1, kInf},   {2, 3, kInf},  {2, 16, kInf},
+      {2, 1000, kInf}, {2, 1000, 0.0}, {1, 1000, 0.0}};
   for (const auto& [threads, grain, split] : layouts) {
     SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain) +
                  ", split_seconds " + std::to_string(split));
@@ -577,8 +577,8 @@ TEST_P(FilterAlgorithmTest, SaveLoadContinuesBitIdentically) {
 }
 
 // Offsets in the saved format (engine/filter.cc): magic, version, sizeof(FilterConfig), config,
-// six counters, the landmark variance bound, then length-prefixed vectors (queued controls, trajectory, known ids, pose
-// covariances), the six columns and the maps.
+// six counters, the landmark variance bound, then length-prefixed vectors (queued controls,
+// trajectory, known ids, pose covariances), the six columns and the maps.
 constexpr std::size_t kConfigAt = 8 + 4 + 8;
 constexpr std::size_t kCountersAt = kConfigAt + sizeof(FilterConfig);
 constexpr std::size_t kPendingAt = kCountersAt + 6 * 8 + 8;
@@ -627,8 +627,10 @@ TEST(FilterSaveTest, LoadRefusesCorruptAndTruncatedStreams) {
   }
   {
     std::string b = good;
-    poke<std::uint8_t>(b, kConfigAt + offsetof(FilterConfig, existence) +
-                              offsetof(ExistenceConfig, negative_information), 2);
+    poke<std::uint8_t>(b,
+                       kConfigAt + offsetof(FilterConfig, existence) +
+                           offsetof(ExistenceConfig, negative_information),
+                       2);
     refused(b, "config flag");
   }
   {
@@ -1497,10 +1499,10 @@ TEST_P(FilterUnknownAssociationTest, SpatialIndexStaysExactAgainstBruteForce) {
         const double x = coordinate(rng), y = coordinate(rng), radius = 4.0 + 10.0 * q;
         const double heading = coordinate(rng) / 10.0;
         std::vector<memory::Slot> in_disc, in_view, brute_disc, brute_view;
-        index.within(x, y, radius, [&](const memory::SpatialEntry& e) { in_disc.push_back(e.slot); });
-        index.in_footprint(x, y, heading, radius, 2.0, [&](const memory::SpatialEntry& e) {
-          in_view.push_back(e.slot);
-        });
+        index.within(x, y, radius,
+                     [&](const memory::SpatialEntry& e) { in_disc.push_back(e.slot); });
+        index.in_footprint(x, y, heading, radius, 2.0,
+                           [&](const memory::SpatialEntry& e) { in_view.push_back(e.slot); });
         for (const memory::SpatialEntry& e : truth) {
           const double dx = e.x - x, dy = e.y - y;
           if (dx * dx + dy * dy > radius * radius) continue;
@@ -1651,8 +1653,8 @@ TEST(FilterAccuracyTest, BaileyWebmapMaximumLikelihoodWithinOneAndAHalfOfKnown) 
   }
   const Summary k = summarise(known), m = summarise(ml), l = summarise(ml_landmarks);
   std::cout << "webmap fastslam2 M=100 over " << seeds << " seeds: ML pose RMSE " << m.mean
-            << " +- " << m.sd << " m (landmarks, paired within 5 m: " << l.mean
-            << " m); known ids " << k.mean << " +- " << k.sd << " m\n";
+            << " +- " << m.sd << " m (landmarks, paired within 5 m: " << l.mean << " m); known ids "
+            << k.mean << " +- " << k.sd << " m\n";
   if (!kSanitized) {
     EXPECT_LT(m.mean, 1.5 * k.mean);
   }
@@ -1661,8 +1663,8 @@ TEST(FilterAccuracyTest, BaileyWebmapMaximumLikelihoodWithinOneAndAHalfOfKnown) 
 // set_map: every particle gets the given map (one shared root); with known ids the ids address
 // it; unknown association finds its landmarks through the index; bad maps change nothing.
 TEST(FilterSetMapTest, SharedPriorMapIsUsedAndBadMapsAreRefused) {
-  for (const Association association :
-       {Association::kKnown, Association::kMaximumLikelihood, Association::kDataAssociationSampling}) {
+  for (const Association association : {Association::kKnown, Association::kMaximumLikelihood,
+                                        Association::kDataAssociationSampling}) {
     SCOPED_TRACE(std::string(to_string(association)));
     FilterConfig c = base_config(Algorithm::kFastSlam1, 8);
     c.association = association;

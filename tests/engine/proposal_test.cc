@@ -398,7 +398,6 @@ TEST(SamplePoseTest, DrawsHaveTheProposalMoments) {
   }
 }
 
-
 // draw_state on the pose-only state is sample_pose with nothing left over.
 TEST(DrawStateTest, PoseOnlyStateIsSamplePose) {
   std::mt19937_64 rng(41);
