@@ -137,8 +137,7 @@ class BasicSpatialIndex {
 
   // Moves the entry (slot, from) to `to`, where it holds `extent`. Throws as erase (no such
   // entry) and insert (bad `to`, bad_alloc); then the index holds the same entries as before.
-  void move(Slot slot, double from_x, double from_y, double to_x, double to_y,
-            float extent = 0.0f);
+  void move(Slot slot, double from_x, double from_y, double to_x, double to_y, float extent = 0.0f);
 
   // Removes every entry (releases this handle's reference to the root).
   void clear() noexcept;

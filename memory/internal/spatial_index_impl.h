@@ -80,7 +80,7 @@ void BasicSpatialIndex<P>::clear() noexcept {
 
 template <class P>
 inline unsigned BasicSpatialIndex<P>::child_of(const Cell& cell, double x, double y,
-                                        Cell& child) noexcept {
+                                               Cell& child) noexcept {
   double cx = cell.x;
   double cy = cell.y;
   double side = cell.side;
@@ -311,8 +311,8 @@ void BasicSpatialIndex<P>::grow_to(double x, double y) {
           if (old->child[i] == nullptr) {
             continue;
           }
-          const unsigned q = ((i >> kLevelsPerNode) >= kHalf ? 2u : 0u) |
-                             ((i & (kSide - 1)) >= kHalf ? 1u : 0u);
+          const unsigned q =
+              ((i >> kLevelsPerNode) >= kHalf ? 2u : 0u) | ((i & (kSide - 1)) >= kHalf ? 1u : 0u);
           if (quadrant[q] == nullptr) {
             quadrant[q] = make_inner();
           }
@@ -612,8 +612,8 @@ void BasicSpatialIndex<P>::erase(Slot slot, double x, double y) {
 }
 
 template <class P>
-void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x,
-                                double to_y, float extent) {
+void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x, double to_y,
+                                float extent) {
   check_point(to_x, to_y, "move");
   if (root_ == nullptr || !contains(root_cell_, from_x, from_y)) {
     internal::throw_no_entry("move", slot, from_x, from_y);
@@ -1006,9 +1006,7 @@ struct BasicSpatialIndex<P>::Best {
     const double dy = e.y - y;
     return dx * dx + dy * dy;
   }
-  bool less(const SpatialEntry& a, const SpatialEntry& b) const noexcept {
-    return d2(a) < d2(b);
-  }
+  bool less(const SpatialEntry& a, const SpatialEntry& b) const noexcept { return d2(a) < d2(b); }
 };
 
 template <class P>

@@ -70,14 +70,14 @@ TEST(MaximumLikelihood, IsValidAndGreedyStableOnRandomScans) {
     // Stability: a pair above p0 not chosen loses to j's own choice or to n's owner.
     for (const AssociationCandidate& c : original) {
       if (c.log_likelihood < log_p0 || assignment[c.observation] == c.slot) continue;
-      const bool j_better = assignment[c.observation] != kNewLandmark &&
-                            likelihood_of(original, c.observation, assignment[c.observation]) >=
-                                c.log_likelihood;
+      const bool j_better =
+          assignment[c.observation] != kNewLandmark &&
+          likelihood_of(original, c.observation, assignment[c.observation]) >= c.log_likelihood;
       const auto o = owner.find(c.slot);
-      const bool n_better = o != owner.end() &&
-                            likelihood_of(original, o->second, c.slot) >= c.log_likelihood;
-      EXPECT_TRUE(j_better || n_better) << "trial " << trial << ": pair (" << c.observation
-                                        << ", " << c.slot << ") blocks the assignment";
+      const bool n_better =
+          o != owner.end() && likelihood_of(original, o->second, c.slot) >= c.log_likelihood;
+      EXPECT_TRUE(j_better || n_better) << "trial " << trial << ": pair (" << c.observation << ", "
+                                        << c.slot << ") blocks the assignment";
     }
     // Input order does not matter.
     Candidates shuffled = original;
@@ -162,16 +162,16 @@ TEST(Sampling, FrequenciesMatchTheLikelihoods) {
   std::map<std::int64_t, int> count;
   std::vector<memory::Slot> taken;
   for (int k = 0; k < draws; ++k) {
-    parallel::RandomStream stream({5, 17, static_cast<std::uint32_t>(k),
-                                   parallel::Purpose::kAssociation});
+    parallel::RandomStream stream(
+        {5, 17, static_cast<std::uint32_t>(k), parallel::Purpose::kAssociation});
     Candidates work = c;
     std::vector<std::int64_t> assignment(1);
     const double log_w = associate_sampling(work, log_p0, stream, assignment, taken);
     ASSERT_NEAR(log_w, std::log(1.0), 1e-12);  // the normaliser 0.5 + 0.2 + 0.1 + 0.2
     ++count[assignment[0]];
   }
-  for (const auto& [slot, p] : std::map<std::int64_t, double>{
-           {7, 0.5}, {3, 0.2}, {9, 0.1}, {kNewLandmark, 0.2}}) {
+  for (const auto& [slot, p] :
+       std::map<std::int64_t, double>{{7, 0.5}, {3, 0.2}, {9, 0.1}, {kNewLandmark, 0.2}}) {
     const double sd = std::sqrt(draws * p * (1 - p));
     EXPECT_NEAR(count[slot], draws * p, 5 * sd) << "slot " << slot;
   }
@@ -185,8 +185,8 @@ TEST(Sampling, NeverGivesOneLandmarkToTwoObservations) {
     Candidates c = random_scan(rng, z, 3, 0.8);
     for (AssociationCandidate& a : c) a.log_likelihood += 10.0;  // "new" rarely wins
     const Candidates original = c;
-    parallel::RandomStream stream({6, 1, static_cast<std::uint32_t>(trial),
-                                   parallel::Purpose::kAssociation});
+    parallel::RandomStream stream(
+        {6, 1, static_cast<std::uint32_t>(trial), parallel::Purpose::kAssociation});
     std::vector<std::int64_t> assignment(z);
     associate_sampling(c, -6.0, stream, assignment, taken);
     std::map<std::int64_t, int> uses;

@@ -246,9 +246,8 @@ template <class Index>
     index.in_footprint(query.x, query.y, heading, query.r, fov,
                        [&](const SpatialEntry& e) { got.push_back(e); });
     if (sorted(got) != brute_footprint(oracle, query.x, query.y, heading, query.r, fov)) {
-      return ::testing::AssertionFailure() << "in_footprint(" << query.x << ", " << query.y
-                                           << ", " << heading << ", " << query.r << ", " << fov
-                                           << ")";
+      return ::testing::AssertionFailure() << "in_footprint(" << query.x << ", " << query.y << ", "
+                                           << heading << ", " << query.r << ", " << fov << ")";
     }
     const std::size_t k = std::size_t{1} + rng() % 12;
     std::vector<SpatialEntry> near(k + 2);
@@ -260,8 +259,8 @@ template <class Index>
     std::sort(expected.begin(), expected.end());
     expected.resize(std::min(k, expected.size()));
     if (n != expected.size()) {
-      return ::testing::AssertionFailure() << "nearest returns " << n << ", expected "
-                                           << expected.size();
+      return ::testing::AssertionFailure()
+             << "nearest returns " << n << ", expected " << expected.size();
     }
     for (std::size_t i = 0; i < n; ++i) {
       if (d2(near[i], query.x, query.y) != expected[i] ||
@@ -280,11 +279,16 @@ enum class Kind { kUniform, kClustered, kDuplicates, kGrid, kHuge };
 
 const char* kind_name(Kind kind) {
   switch (kind) {
-    case Kind::kUniform: return "uniform";
-    case Kind::kClustered: return "clustered";
-    case Kind::kDuplicates: return "duplicates";
-    case Kind::kGrid: return "grid";
-    case Kind::kHuge: return "huge";
+    case Kind::kUniform:
+      return "uniform";
+    case Kind::kClustered:
+      return "clustered";
+    case Kind::kDuplicates:
+      return "duplicates";
+    case Kind::kGrid:
+      return "grid";
+    case Kind::kHuge:
+      return "huge";
   }
   return "?";
 }
@@ -324,8 +328,7 @@ std::pair<double, double> random_point(Kind kind, std::mt19937_64& rng) {
 // One random change of `index`, mirrored in `oracle`: insert, erase, or a move (small, by
 // metres, or anywhere).
 template <class Index>
-void random_change(Index& index, Oracle& oracle, Kind kind, Slot& next_slot,
-                   std::mt19937_64& rng) {
+void random_change(Index& index, Oracle& oracle, Kind kind, Slot& next_slot, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
   const unsigned op = static_cast<unsigned>(rng() % 10);
   if (oracle.empty() || op < 3) {
@@ -384,11 +387,10 @@ class SpatialIndexTest : public ::testing::Test {
   typename C::Heap heap_;
 };
 
-using Configs =
-    ::testing::Types<Config<DefaultSpatialPolicy, PoolHeap>,
-                     Config<SpatialPolicy<1, 8, LocalRefcount>, MallocHeap>,
-                     Config<SpatialPolicy<2, 16, AtomicRefcount>, MallocHeap>,
-                     Config<SpatialPolicy<2, 8, AtomicRefcount>, PoolHeap>>;
+using Configs = ::testing::Types<Config<DefaultSpatialPolicy, PoolHeap>,
+                                 Config<SpatialPolicy<1, 8, LocalRefcount>, MallocHeap>,
+                                 Config<SpatialPolicy<2, 16, AtomicRefcount>, MallocHeap>,
+                                 Config<SpatialPolicy<2, 8, AtomicRefcount>, PoolHeap>>;
 TYPED_TEST_SUITE(SpatialIndexTest, Configs);
 
 TYPED_TEST(SpatialIndexTest, EmptyIndexFindsNothing) {
@@ -405,8 +407,8 @@ TYPED_TEST(SpatialIndexTest, EmptyIndexFindsNothing) {
 }
 
 TYPED_TEST(SpatialIndexTest, RandomMapsMatchBruteForce) {
-  for (Kind kind : {Kind::kUniform, Kind::kClustered, Kind::kDuplicates, Kind::kGrid,
-                    Kind::kHuge}) {
+  for (Kind kind :
+       {Kind::kUniform, Kind::kClustered, Kind::kDuplicates, Kind::kGrid, Kind::kHuge}) {
     SCOPED_TRACE(kind_name(kind));
     std::mt19937_64 rng(1234 + static_cast<int>(kind));
     typename TestFixture::IndexType index(this->heap_);
@@ -462,8 +464,8 @@ TYPED_TEST(SpatialIndexTest, GridQueriesExactlyOnTheRadius) {
         got.clear();
         index.in_footprint(qx, qy, std::numbers::pi / 2, r, std::numbers::pi / 2,
                            [&](const SpatialEntry& e) { got.push_back(e); });
-        ASSERT_EQ(sorted(got), brute_footprint(oracle, qx, qy, std::numbers::pi / 2, r,
-                                               std::numbers::pi / 2));
+        ASSERT_EQ(sorted(got),
+                  brute_footprint(oracle, qx, qy, std::numbers::pi / 2, r, std::numbers::pi / 2));
       }
     }
   }
@@ -686,10 +688,17 @@ TYPED_TEST(SpatialIndexTest, StrongGuaranteeOnAllocationFailure) {
       bool threw = false;
       try {
         switch (variant % 4) {
-          case 0: index.insert(next, target.x + 1e-6, target.y); break;  // likely splits
-          case 1: index.erase(target.slot, target.x, target.y); break;
-          case 2: index.move(target.slot, target.x, target.y, px, py); break;
-          default: index.move(target.slot, target.x, target.y, target.x + 1e-7, target.y);
+          case 0:
+            index.insert(next, target.x + 1e-6, target.y);
+            break;  // likely splits
+          case 1:
+            index.erase(target.slot, target.x, target.y);
+            break;
+          case 2:
+            index.move(target.slot, target.x, target.y, px, py);
+            break;
+          default:
+            index.move(target.slot, target.x, target.y, target.x + 1e-7, target.y);
         }
       } catch (const std::bad_alloc&) {
         threw = true;
@@ -825,9 +834,8 @@ TEST(SpatialIndexConcurrency, ParticlesShareCopyChangeAndRelease) {
       next_oracles[p] = std::move(oracle);
     });
     // Release the old generation from many threads at once.
-    kernel.for_each_particle(indexes.size(), [&](std::size_t p) {
-      indexes[p] = SpatialIndex(heap);
-    });
+    kernel.for_each_particle(indexes.size(),
+                             [&](std::size_t p) { indexes[p] = SpatialIndex(heap); });
     indexes = std::move(next_indexes);
     oracles = std::move(next_oracles);
   }
