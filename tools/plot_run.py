@@ -162,9 +162,13 @@ def main():
         title = "{} M={} {} association, seed {}".format(
             metrics.get("algorithm"), metrics.get("particles"), metrics.get("association"),
             metrics.get("seed"))
-        if "true_landmarks" in metrics and "steps" in metrics:
-            title += ", {} landmarks, {} steps".format(metrics["true_landmarks"],
-                                                       metrics["steps"])
+        # A simulated world has its true landmark count; real data (no truth) its mapped one.
+        if metrics.get("true_landmarks"):
+            title += ", {} landmarks".format(metrics["true_landmarks"])
+        elif "landmarks" in metrics:
+            title += ", {} landmarks mapped".format(metrics["landmarks"])
+        if "steps" in metrics:
+            title += ", {} steps".format(metrics["steps"])
         if metrics.get("motion") == "none":
             title += ", no odometry"
         if errors:
