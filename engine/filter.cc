@@ -461,14 +461,12 @@ struct Filter::Impl {
       for (std::size_t l = 0; l < count; ++l) std::fill_n(&pose_only[l * N + 3], N - 3, 0.0);
       sample_pose_lanes<N>(proposal, pose_only.data(), state, count);
       for (std::size_t l = 0; l < count; ++l) {
-        PoseGaussian<N> g;
+        Eigen::Matrix<double, N, N> cov;
         for (int row = 0, e = 0; row < N; ++row) {
-          for (int c = row; c < N; ++c, ++e) g.cov(row, c) = g.cov(c, row) = proposal.cov[e][l];
+          for (int c = row; c < N; ++c, ++e) cov(row, c) = cov(c, row) = proposal.cov[e][l];
         }
-        Eigen::Matrix<double, N, N> rest;
-        draw_state<N>(g, pose_only.data() + l * N, rest);
         Eigen::Map<Eigen::Matrix<double, N, N>> slot(&pose_cov[(begin + l) * 25]);
-        slot = rest;
+        slot = rest_given_pose<N>(psd_factor<N>(cov));
       }
     } else {
       sample_pose_lanes<N>(proposal, draws, state, count);

@@ -213,6 +213,23 @@ inline Eigen::Matrix<double, N, 1> sample_pose(const PoseGaussian<N>& proposal,
   return s;
 }
 
+// The pose's dimension within a state of N components (the first min(N, 3)).
+template <int kN>
+inline constexpr int kPoseDimOf = kN < 3 ? kN : 3;
+
+// What draw_state leaves: the covariance of the components after the pose given the pose, from
+// F = psd_factor(cov) (F22 F22^T in the lower-right block, zero elsewhere; zero for N <= 3).
+template <int N>
+inline Eigen::Matrix<double, N, N> rest_given_pose(const Eigen::Matrix<double, N, N>& f) {
+  constexpr int kRest = N - kPoseDimOf<N>;
+  Eigen::Matrix<double, N, N> out = Eigen::Matrix<double, N, N>::Zero();
+  if constexpr (kRest > 0) {
+    const Eigen::Matrix<double, kRest, kRest> f22 = f.template bottomRightCorner<kRest, kRest>();
+    out.template bottomRightCorner<kRest, kRest>() = f22 * f22.transpose();
+  }
+  return out;
+}
+
 // The FastSLAM 2.0 draw: the pose (components 0-2) from the proposal; for a longer state (N = 5,
 // the no-odometry velocities v, omega) the rest is NOT drawn but kept as the Gaussian
 // conditioned on the drawn pose: its mean goes into the returned state and its covariance into
@@ -229,16 +246,10 @@ template <int N>
 inline Eigen::Matrix<double, N, 1> draw_state(const PoseGaussian<N>& proposal,
                                               const double* normals,
                                               Eigen::Matrix<double, N, N>& cov_after) {
-  constexpr int kPose = N < 3 ? N : 3;
   const Eigen::Matrix<double, N, N> f = psd_factor<N>(proposal.cov);
   Eigen::Matrix<double, N, 1> n = Eigen::Map<const Eigen::Matrix<double, N, 1>>(normals);
-  cov_after.setZero();
-  if constexpr (N > kPose) {
-    n.template tail<N - kPose>().setZero();
-    const Eigen::Matrix<double, N - kPose, N - kPose> f22 =
-        f.template bottomRightCorner<N - kPose, N - kPose>();
-    cov_after.template bottomRightCorner<N - kPose, N - kPose>() = f22 * f22.transpose();
-  }
+  if constexpr (N > kPoseDimOf<N>) n.template tail<N - kPoseDimOf<N>>().setZero();
+  cov_after = rest_given_pose<N>(f);
   Eigen::Matrix<double, N, 1> s = proposal.mean + f * n;
   if constexpr (kHeadingIndex<N> >= 0) {
     s[kHeadingIndex<N>] = wrap_angle(s[kHeadingIndex<N>]);

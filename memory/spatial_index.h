@@ -324,6 +324,11 @@ class BasicSpatialIndex {
   static void within_many_node(const Node* node, const Cell& cell, const DiscBounds* discs,
                                std::size_t first, std::uint64_t active, const Reach2& reach2,
                                Visit& visit);
+  // Whether a leaf at squared distance box2 is out of reach of all its entries, given its widest
+  // (first) entry's reach2: with the pruning's rounding margin, as within_node's box test.
+  static bool beyond_reach(double box2, double widest2) noexcept {
+    return box2 > widest2 + std::fabs(widest2) * 0x1p-40;
+  }
   // Whether extent a ranks before b in a leaf (larger; NaN before any number).
   static bool wider(float a, float b) noexcept { return a > b || (a != a && b == b); }
   // Puts the leaf's widest entry first (O(count)), after any change but an append.

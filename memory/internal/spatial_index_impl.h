@@ -761,10 +761,7 @@ void BasicSpatialIndex<P>::within_node(const Node* node, const Cell& cell, doubl
           continue;
         }
       } else if (child->leaf() && child->count != 0) {
-        // The leaf's widest entry comes first: when even its reach (with the pruning's
-        // rounding margin) falls short of the square, so does every entry's.
-        const double widest2 = reach2(entries(child)[0].extent);
-        if (box2 > widest2 + std::fabs(widest2) * 0x1p-40) {
+        if (beyond_reach(box2, reach2(entries(child)[0].extent))) {
           continue;
         }
       }
@@ -899,9 +896,7 @@ void BasicSpatialIndex<P>::within_many_node(const Node* node, const Cell& cell,
         continue;
       }
       if (leaf) {
-        // As within_node: the leaf's widest entry first, and no entry reaches farther.
-        const double widest2 = reach2(first + k, entries(child)[0].extent);
-        if (box2 > widest2 + std::fabs(widest2) * 0x1p-40) {
+        if (beyond_reach(box2, reach2(first + k, entries(child)[0].extent))) {
           continue;
         }
       }
