@@ -93,6 +93,14 @@ void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option(
       "--vp-laser-yaw-deg", w.vp_laser_yaw_deg,
       "victoria-park: the laser's yaw on the car, degrees counter-clockwise (default 0)");
+  cmd.add_option("--vp-laser-x", o.victoria_park.geometry.a,
+                 "victoria-park: the laser's distance ahead of the rear axle, m (the model's a)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--vp-laser-y", o.victoria_park.geometry.b,
+                 "victoria-park: the laser's offset left of the car's centre line, m (the "
+                 "model's b)")
+      ->capture_default_str();
   cmd.add_option("--vp-max-diameter", gate.max_diameter,
                  "victoria-park: detections wider than this are dropped, m (default: no limit)")
       ->check(CLI::PositiveNumber);

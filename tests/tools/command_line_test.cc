@@ -217,6 +217,15 @@ TEST_F(CommandLine, VictoriaParkGateFlags) {
   EXPECT_EQ(o.victoria_park.laser_yaw, 0.0);
   EXPECT_DOUBLE_EQ(run("{}", "--vp-laser-yaw-deg -0.5").victoria_park.laser_yaw,
                    -0.5 * std::numbers::pi / 180);
+  // The laser's place on the car (the model's a and b): the README's values unless given.
+  const engine::VictoriaParkGeometry nominal;
+  EXPECT_EQ(o.victoria_park.geometry.a, nominal.a);
+  EXPECT_EQ(o.victoria_park.geometry.b, nominal.b);
+  o = run(R"({"vp-laser-y": 0.25})", "--vp-laser-x 3.6");
+  EXPECT_EQ(o.victoria_park.geometry.a, 3.6);
+  EXPECT_EQ(o.victoria_park.geometry.b, 0.25);
+  EXPECT_EQ(o.victoria_park.geometry.l, nominal.l);
+  EXPECT_NE(error_of("{}", "--vp-laser-x 0").find("--vp-laser-x"), std::string::npos);
   EXPECT_NE(error_of("{}", "--vp-max-diameter 0").find("--vp-max-diameter"), std::string::npos);
   EXPECT_NE(error_of("{}", "--vp-min-range -1").find("--vp-min-range"), std::string::npos);
 }
