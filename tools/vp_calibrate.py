@@ -291,7 +291,11 @@ def calibrate(times, scans, fits=("yaw+a",), scale=0.05, iv=False):
               "estimator": "instrumental variables (turn of pairs k-2, k+2)" if iv else
               "least squares", "fits": {}}
     for name in fits:
-        params, errors, e = fit(phi, tl, FITS[name], scale, instrument=instrument)
+        try:
+            params, errors, e = fit(phi, tl, FITS[name], scale, instrument=instrument)
+        except np.linalg.LinAlgError:
+            raise DataError("fit {}: singular normal equations (too few turning pairs to tell "
+                            "the parameters apart)".format(name))
         result["fits"][name] = {
             "delta_deg": math.degrees(params["delta"]),
             "delta_se_deg": math.degrees(errors["delta"]),
