@@ -7,12 +7,14 @@ Procrustes) into the laser's motion; moved to the rear axle through the mounting
 delta), that motion must be a circular arc whose chord points at half the heading change (the
 rear axle of an Ackermann car moves along the car's heading). The mounting is fitted to that
 constraint by robust (soft-L1) Gauss-Newton over all pairs. A pair's rotation noise biases a
-low in least squares (errors in variables, see fit()); --iv uses the turn of the pairs two
-scans before and after as instruments instead, which removes that bias. Owns no state between
+low in plain least squares (errors in variables, see fit()), so the default estimator uses the
+turn of the pairs two scans before and after as instruments instead, which removes that bias
+(--least-squares gives the plain fit). Owns no state between
 runs; costs one pass over the scans (about 7000 on the real data: about 1.5 s in Python) and a
 few vectorised Gauss-Newton iterations.
 
-Usage: tools/vp_calibrate.py [--data DIR] [--fit yaw|yaw+a|yaw+a+b|all] [--iv] [--json FILE]
+Usage: tools/vp_calibrate.py [--data DIR] [--fit yaw|yaw+a|yaw+a+b|all] [--least-squares]
+       [--json FILE]
        (numpy only; run with /usr/bin/python3)
 """
 import argparse
@@ -341,9 +343,10 @@ def main(argv=None):
     parser.add_argument("--fit", choices=list(FITS) + ["all"], default="yaw+a")
     parser.add_argument("--scale", type=float, default=0.05,
                         help="soft-L1 scale of the residuals (rad)")
-    parser.add_argument("--iv", action="store_true",
-                        help="instrumental variables: unbiased by the rotation noise of a pair "
-                        "(see fit()), larger standard errors")
+    parser.add_argument("--least-squares", action="store_true",
+                        help="plain robust least squares instead of instrumental variables: "
+                        "smaller standard errors, but a is biased low by each pair's rotation "
+                        "noise (see fit())")
     parser.add_argument("--json", help="write the results to this file")
     args = parser.parse_args(argv)
     if not args.scale > 0:
@@ -351,7 +354,7 @@ def main(argv=None):
     try:
         times, scans = load(args.data)
         result = calibrate(times, scans, list(FITS) if args.fit == "all" else [args.fit],
-                           args.scale, args.iv)
+                           args.scale, not args.least_squares)
     except DataError as error:
         print("vp_calibrate: {}".format(error), file=sys.stderr)
         return 1

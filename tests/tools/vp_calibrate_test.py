@@ -179,7 +179,8 @@ def fit_synthetic(tmp, name, seed, range_sd, bearing_sd, iv):
         os.makedirs(out)
         synthetic(out, math.radians(-0.7), 3.5, 0.5, seed, range_sd=range_sd, bearing_sd=bearing_sd)
     result_path = os.path.join(tmp, name + (".iv" if iv else "") + ".json")
-    done = run(["--data", out, "--fit", "all", "--json", result_path] + (["--iv"] if iv else []))
+    done = run(["--data", out, "--fit", "all", "--json", result_path] +
+               ([] if iv else ["--least-squares"]))
     print(done.stdout, done.stderr)
     check(done.returncode == 0, "{}: run failed: {}".format(name, done.stderr))
     if done.returncode != 0:
@@ -233,7 +234,7 @@ def test_synthetic(tmp):
               "fit() is wrong".format(result["fits"]["yaw+a"]["a_m"]))
     result = fit_synthetic(tmp, "noisy", SEED, 0.1, 0.01, iv=True)
     if result:
-        check(result["estimator"].startswith("instrumental"), "--iv not used")
+        check(result["estimator"].startswith("instrumental"), "instrumental variables not used by default")
         check_recovered(result, "instrumental variables, high noise", ("yaw+a",), 0.3, 0.15,
                         asymmetry=False)
 
@@ -277,7 +278,7 @@ def test_real(tmp):
         print("{} is absent (set FASTSLAM_SHARED_DIR): skipped".format(data))
         sys.exit(77)
     result_path = os.path.join(tmp, "real.json")
-    done = run(["--data", data, "--fit", "yaw+a", "--json", result_path])
+    done = run(["--data", data, "--fit", "yaw+a", "--least-squares", "--json", result_path])
     print(done.stdout, done.stderr)
     check(done.returncode == 0, "real data run failed: {}".format(done.stderr))
     if done.returncode == 0:
@@ -286,14 +287,15 @@ def test_real(tmp):
         check(-1.5 <= fit["delta_deg"] <= -0.8, "real: delta {} deg".format(fit["delta_deg"]))
         check(3.4 <= fit["a_m"] <= 3.8, "real: a {} m".format(fit["a_m"]))
     # Instrumental variables: a regression guard around the measured -1.12 deg, 3.73 +- 0.03 m.
-    done = run(["--data", data, "--fit", "yaw+a", "--iv", "--json", result_path])
+    done = run(["--data", data, "--fit", "yaw+a", "--json", result_path])
     print(done.stdout, done.stderr)
-    check(done.returncode == 0, "real data run (--iv) failed: {}".format(done.stderr))
+    check(done.returncode == 0,
+          "real data run (instrumental variables) failed: {}".format(done.stderr))
     if done.returncode == 0:
         with open(result_path) as f:
             fit = json.load(f)["fits"]["yaw+a"]
-        check(-1.5 <= fit["delta_deg"] <= -0.8, "real --iv: delta {} deg".format(fit["delta_deg"]))
-        check(3.6 <= fit["a_m"] <= 3.9, "real --iv: a {} m".format(fit["a_m"]))
+        check(-1.5 <= fit["delta_deg"] <= -0.8, "real iv: delta {} deg".format(fit["delta_deg"]))
+        check(3.6 <= fit["a_m"] <= 3.9, "real iv: a {} m".format(fit["a_m"]))
 
 
 def main():
