@@ -234,7 +234,8 @@ def test_synthetic(tmp):
               "fit() is wrong".format(result["fits"]["yaw+a"]["a_m"]))
     result = fit_synthetic(tmp, "noisy", SEED, 0.1, 0.01, iv=True)
     if result:
-        check(result["estimator"].startswith("instrumental"), "instrumental variables not used by default")
+        check(result["estimator"].startswith("instrumental"),
+              "instrumental variables not used by default")
         check_recovered(result, "instrumental variables, high noise", ("yaw+a",), 0.3, 0.15,
                         asymmetry=False)
 
