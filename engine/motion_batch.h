@@ -247,8 +247,8 @@ struct Lane<BrownianModel<Turn>> {
     }
   }();
 
-  [[gnu::always_inline]] static bool move(const Model& /*m*/, double (&s)[kN], double u0,
-                                          double u1, double dt) noexcept {
+  [[gnu::always_inline]] static bool move(const Model& /*m*/, double (&s)[kN], double u0, double u1,
+                                          double dt) noexcept {
     const double v = s[3] + u0;
     const double w = s[4] + u1;
     double c, sn;

@@ -236,8 +236,8 @@ inline Eigen::Matrix<double, N, N> rest_given_pose(const Eigen::Matrix<double, N
 // the lower-right block of `cov_after` (zero elsewhere), where the next prediction starts from.
 // Given the pose path the velocities enter the motion linearly (eq. 81), so this is the
 // Rao-Blackwellised treatment of them (a marginalised particle filter); with the curvature walk
-// (theta_dot = v kappa, bilinear) it is the same treatment of the linearised motion. Drawing them as well
-// would make the next prior treat them as exact: a wrong v or omega could then never be
+// (theta_dot = v kappa, bilinear) it is the same treatment of the linearised motion. Drawing them
+// as well would make the next prior treat them as exact: a wrong v or omega could then never be
 // corrected by a measurement, only by resampling, and FastSLAM 2.0 with one particle diverged
 // on Victoria Park without odometry (docs/victoria-park.md). With F = psd_factor(cov) lower
 // triangular the draw is mean + F n with n's components from 3 on set to zero, and the

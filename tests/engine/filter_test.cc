@@ -471,9 +471,9 @@ TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording
   events.insert(events.end(), s.events.begin() + 100, s.events.begin() + 300);
   const auto controls = static_cast<std::size_t>(
       std::count_if(events.begin(), events.end(), [](const Event& e) { return !e.is_scan; }));
-  for (const MotionKind kind : {MotionKind::kBaileyCar, MotionKind::kUnicycle,
-                                MotionKind::kVictoriaPark, MotionKind::kBrownian,
-                                MotionKind::kBrownianCurvature}) {
+  for (const MotionKind kind :
+       {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kVictoriaPark,
+        MotionKind::kBrownian, MotionKind::kBrownianCurvature}) {
     for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
       SCOPED_TRACE("motion " + std::to_string(static_cast<int>(kind)) + ", " +
                    std::string(to_string(algorithm)));

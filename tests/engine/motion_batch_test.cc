@@ -437,7 +437,9 @@ TEST(MotionBatchTest, CurvatureStepsOfManyTurnsUseTheScalarModel) {
         s << 0.0, 0.0, testing::random_heading(r), 50.0, uniform(r, 0.9, 1.1);
         return s;
       },
-      [](std::mt19937_64&) { return ControlStep{0.0, 0.0, 0.5}; });
+      [](std::mt19937_64&) {
+        return ControlStep{0.0, 0.0, 0.5};
+      });
   check_sample(model, f, sigmas);
   check_predict(model, f, sigmas);
 }
