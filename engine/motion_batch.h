@@ -273,20 +273,22 @@ struct Lane<BrownianModel<Turn>> {
     j[1] = c * dt;
     j[2] = vel * c * dt;
     j[3] = sn * dt;
-#pragma GCC unroll 8
-    for (auto& row : v) row[0] = row[1] = 0.0;
     if constexpr (Turn::kRateDependsOnSpeed) {
-      const double kappa = s[4] + u1;
-      j[4] = kappa * dt;
+      j[4] = (s[4] + u1) * dt;
       j[5] = vel * dt;
-      v[2][0] = kappa * dt;
-      v[2][1] = vel * dt;
     } else {
       j[4] = dt;
-      v[2][1] = dt;
     }
+#pragma GCC unroll 8
+    for (auto& row : v) row[0] = row[1] = 0.0;
     v[0][0] = c * dt;
     v[1][0] = sn * dt;
+    if constexpr (Turn::kRateDependsOnSpeed) {
+      v[2][0] = j[4];  // kappa' dt
+      v[2][1] = j[5];  // v' dt
+    } else {
+      v[2][1] = dt;
+    }
     v[3][0] = 1.0;
     v[4][1] = 1.0;
   }
