@@ -29,7 +29,7 @@ double seconds_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double>(b - a).count();
 }
 
-int pose_dim_of(MotionKind kind) { return kind == MotionKind::kBrownian ? 5 : 3; }
+int pose_dim_of(MotionKind kind) { return without_odometry(kind) ? 5 : 3; }
 
 constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
 
@@ -156,7 +156,7 @@ struct EkfSlam::Impl {
     using State = typename Motion::State;
     const State s = x.head<D>();
     typename Motion::Control u(control.u0, control.u1);
-    if constexpr (std::is_same_v<Motion, BrownianVelocityModel>) u.setZero();
+    if constexpr (Motion::kNoOdometry) u.setZero();
     const typename Motion::Control sigmas(config.motion.sigma_control[0],
                                           config.motion.sigma_control[1]);
     const auto f = motion.jacobian_pose(s, u, dt);
@@ -186,6 +186,9 @@ struct EkfSlam::Impl {
         break;
       case MotionKind::kBrownian:
         predict_with(BrownianVelocityModel(), control, dt);
+        break;
+      case MotionKind::kBrownianCurvature:
+        predict_with(BrownianCurvatureModel(), control, dt);
         break;
     }
   }

@@ -2,7 +2,8 @@
 // sections 7-9): one Gaussian over the vehicle pose and every landmark, with a dense covariance.
 //
 // The state is [pose; m_1; ...; m_N]: the pose is (x, y, theta), or (x, y, theta, v, omega) for
-// MotionKind::kBrownian, and each landmark adds its (x, y). It is built from the same
+// MotionKind::kBrownian ((x, y, theta, v, kappa) for kBrownianCurvature), and each landmark adds
+// its (x, y). It is built from the same
 // `FilterConfig` as `Filter` (algorithm = Algorithm::kEkf) and uses the same models:
 //   predict   the motion model of config.motion (engine/motion_model.h), linearised: the pose
 //             mean goes through h(u, s), its covariance through F P F^T + V M V^T with
@@ -39,7 +40,7 @@
 //
 // Ownership: owns its state; `observe` borrows the scan for the call only.
 // Thread safety: thread-compatible: one call at a time; single-threaded inside (deterministic).
-// Costs, n = 3 + 2N (5 + 2N for kBrownian) for N landmarks: `predict` O(N) time, no allocation
+// Costs, n = 3 + 2N (5 + 2N without odometry) for N landmarks: `predict` O(N) time, no allocation
 // but the trajectory; `observe` O(n^2) per associated observation (the rank-2 covariance update:
 // about n^2 flops and one pass over n^2 / 2 doubles), plus O(N) per new landmark (amortised:
 // the covariance grows by 1.25x when full, an O(n^2) copy) and, for ML association,

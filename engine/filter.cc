@@ -179,6 +179,9 @@ struct Filter::Impl {
       case MotionKind::kBrownian:
         run_pass_with(BrownianVelocityModel(), scan, scan_step);
         break;
+      case MotionKind::kBrownianCurvature:
+        run_pass_with(BrownianCurvatureModel(), scan, scan_step);
+        break;
     }
     pending.clear();
   }
@@ -299,7 +302,7 @@ struct Filter::Impl {
     for (std::size_t k = 0; k < k_steps; ++k) {
       const PendingControl& c = pending[k];
       steps[k] = {c.u0, c.u1, c.dt};
-      if constexpr (std::is_same_v<Motion, BrownianVelocityModel>) steps[k].u0 = steps[k].u1 = 0;
+      if constexpr (Motion::kNoOdometry) steps[k].u0 = steps[k].u1 = 0;
       keys[k] = c.step;
     }
     double* const store_col[5] = {store.x().data(), store.y().data(), store.theta().data(),
@@ -788,7 +791,7 @@ struct Filter::Impl {
   // Whether pose_cov holds anything between a scan and the next control: the velocities'
   // covariance of FastSLAM 2.0 on the no-odometry state (draw_state); zero otherwise.
   bool carries_velocity_cov() const {
-    return config.algorithm == Algorithm::kFastSlam2 && config.motion.kind == MotionKind::kBrownian;
+    return config.algorithm == Algorithm::kFastSlam2 && without_odometry(config.motion.kind);
   }
 
   void resample(std::uint64_t scan_step) {

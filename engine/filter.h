@@ -84,7 +84,8 @@ struct MapLandmark {
 };
 
 struct Estimate {
-  // Weighted mean of the particles' poses (heading by circular mean); v, omega for kBrownian.
+  // Weighted mean of the particles' poses (heading by circular mean); v, omega for kBrownian,
+  // v, kappa for kBrownianCurvature.
   double mean_pose[5] = {0, 0, 0, 0, 0};
   // The pose of the particle of highest weight (lowest index on ties).
   double best_pose[5] = {0, 0, 0, 0, 0};

@@ -55,6 +55,7 @@ void validate(const FilterConfig& c) {
       break;
     case MotionKind::kUnicycle:
     case MotionKind::kBrownian:
+    case MotionKind::kBrownianCurvature:
       break;
     default:
       require(false, "unknown motion kind");
@@ -126,6 +127,8 @@ std::string_view to_string(MotionKind kind) {
       return "victoria-park";
     case MotionKind::kBrownian:
       return "none";
+    case MotionKind::kBrownianCurvature:
+      return "none-curvature";
   }
   return "unknown";
 }

@@ -33,7 +33,16 @@ enum class MotionKind : std::uint8_t {
   kUnicycle,      // control (v, omega)
   kVictoriaPark,  // control (encoder speed, steering); the state is the laser's pose
   kBrownian,      // no odometry (eq. 79-81): controls carry no information, only dt
+  // No odometry, speed and path curvature walked (engine/motion_model.h BrownianCurvatureModel:
+  // theta_dot = v kappa, the rear axle of a car); controls carry no information, only dt.
+  kBrownianCurvature,
 };
+
+// Whether the model ignores the controls and carries its velocities in the state (x, y, theta,
+// v, omega or kappa): kBrownian and kBrownianCurvature.
+constexpr bool without_odometry(MotionKind kind) noexcept {
+  return kind == MotionKind::kBrownian || kind == MotionKind::kBrownianCurvature;
+}
 
 struct MotionConfig {
   MotionKind kind = MotionKind::kBaileyCar;
@@ -41,7 +50,7 @@ struct MotionConfig {
   VictoriaParkGeometry geometry;    // kVictoriaPark
   // Standard deviations of the control noise (per control component: speed m/s and steering
   // rad for the cars, v and omega for the unicycle; for kBrownian the per-step increments of v
-  // and omega, eq. 80).
+  // and omega, eq. 80; for kBrownianCurvature those of v (m/s) and kappa (1/m)).
   double sigma_control[2] = {0.3, 3.0 * std::numbers::pi / 180};
 };
 
@@ -124,7 +133,8 @@ struct FilterConfig {
   // store per particle per control and a reduction per control).
   bool record_trajectory = false;
   EkfConfig ekf;  // Algorithm::kEkf only
-  // The initial pose of every particle (x, y, theta; v, omega for kBrownian).
+  // The initial pose of every particle (x, y, theta; v, omega for kBrownian; v, kappa for
+  // kBrownianCurvature).
   double initial_pose[5] = {0, 0, 0, 0, 0};
 };
 

@@ -233,14 +233,22 @@ struct Lane<VictoriaParkModel> {
   }
 };
 
-template <>
-struct Lane<BrownianVelocityModel> {
+// Both no-odometry models. The curvature walk's heading step v' kappa' dt adds the entries
+// (2, 3) and (2, 4) = (kappa' dt, v' dt) to J, where the turn-rate walk has (2, 4) = dt only.
+template <class Turn>
+struct Lane<BrownianModel<Turn>> {
+  using Model = BrownianModel<Turn>;
   static constexpr int kN = 5;
-  static constexpr std::array<std::array<int, 2>, 5> kJacobianPattern = {
-      {{0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 4}}};
+  static constexpr auto kJacobianPattern = [] {
+    if constexpr (Turn::kRateDependsOnSpeed) {
+      return std::array<std::array<int, 2>, 6>{{{0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}, {2, 4}}};
+    } else {
+      return std::array<std::array<int, 2>, 5>{{{0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 4}}};
+    }
+  }();
 
-  [[gnu::always_inline]] static bool move(const BrownianVelocityModel& /*m*/, double (&s)[kN],
-                                          double u0, double u1, double dt) noexcept {
+  [[gnu::always_inline]] static bool move(const Model& /*m*/, double (&s)[kN], double u0, double u1,
+                                          double dt) noexcept {
     const double v = s[3] + u0;
     const double w = s[4] + u1;
     double c, sn;
@@ -248,15 +256,16 @@ struct Lane<BrownianVelocityModel> {
     bool ok = sincos_in_domain(s[2]);
     s[0] = madd(v * c, dt, s[0]);
     s[1] = madd(v * sn, dt, s[1]);
-    s[2] = wrap_near(madd(w, dt, s[2]), ok);
+    s[2] = wrap_near(madd(Turn::rate(v, w), dt, s[2]), ok);
     s[3] = v;
     s[4] = w;
     return ok;
   }
 
-  [[gnu::always_inline]] static void terms(const BrownianVelocityModel& /*m*/,
-                                           const double (&s)[kN], double u0, double /*u1*/,
-                                           double dt, double (&j)[5], double (&v)[kN][2]) noexcept {
+  [[gnu::always_inline]] static void terms(const Model& /*m*/, const double (&s)[kN], double u0,
+                                           double u1, double dt,
+                                           double (&j)[kJacobianPattern.size()],
+                                           double (&v)[kN][2]) noexcept {
     const double vel = s[3] + u0;
     double c, sn;
     parallel::internal::sincos(s[2], c, sn);
@@ -264,12 +273,22 @@ struct Lane<BrownianVelocityModel> {
     j[1] = c * dt;
     j[2] = vel * c * dt;
     j[3] = sn * dt;
-    j[4] = dt;
+    if constexpr (Turn::kRateDependsOnSpeed) {
+      j[4] = (s[4] + u1) * dt;
+      j[5] = vel * dt;
+    } else {
+      j[4] = dt;
+    }
 #pragma GCC unroll 8
     for (auto& row : v) row[0] = row[1] = 0.0;
     v[0][0] = c * dt;
     v[1][0] = sn * dt;
-    v[2][1] = dt;
+    if constexpr (Turn::kRateDependsOnSpeed) {
+      v[2][0] = j[4];  // kappa' dt
+      v[2][1] = j[5];  // v' dt
+    } else {
+      v[2][1] = dt;
+    }
     v[3][0] = 1.0;
     v[4][1] = 1.0;
   }

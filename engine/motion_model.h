@@ -17,7 +17,8 @@
 //
 // The models: `BaileyCarModel` (Bailey's simulator), `UnicycleModel` (v, omega),
 // `VictoriaParkModel` (Guivant-Nebot Ackermann car, state = the laser's pose), and
-// `BrownianVelocityModel` (no odometry, paper eq. 79-81, state (x, y, theta, v, omega)).
+// `BrownianVelocityModel` (no odometry, paper eq. 79-81, state (x, y, theta, v, omega)) and
+// `BrownianCurvatureModel` (no odometry, state (x, y, theta, v, kappa), theta_dot = v kappa).
 // All integrate one explicit Euler step of length dt, as the datasets' reference code does.
 //
 // Ownership: models are small value types (a few doubles). Thread safety: every method is const
@@ -48,6 +49,9 @@ class MotionModelBase {
   using ControlJacobian = Eigen::Matrix<double, StateDim, ControlDim>;
   using StateCovariance = Eigen::Matrix<double, StateDim, StateDim>;
   using ControlCovariance = Eigen::Matrix<double, ControlDim, ControlDim>;
+  // True for the models whose "control" is a nominally zero increment (no odometry): the filter
+  // and the EKF pass zero whatever the log's controls say.
+  static constexpr bool kNoOdometry = false;
 
   // P = V M V^T with V = jacobian_control(s, u, dt). REQUIRES: M symmetric positive semidefinite.
   StateCovariance pose_noise(const State& s, const Control& u, double dt,
@@ -224,50 +228,89 @@ class VictoriaParkModel : public MotionModelBase<VictoriaParkModel, 3, 2> {
   VictoriaParkGeometry g_;
 };
 
+// How the heading turns in the no-odometry models below: the fifth state component c, walked
+// like the speed v, gives the turn rate theta_dot = rate(v, c).
+struct TurnRateWalk {  // c = omega (rad/s), theta_dot = omega (paper eq. 79-81)
+  static constexpr bool kRateDependsOnSpeed = false;
+  static double rate(double /*v*/, double c) { return c; }
+};
+struct CurvatureWalk {  // c = kappa (1/m), theta_dot = v kappa: no turning while standing still
+  static constexpr bool kRateDependsOnSpeed = true;
+  static double rate(double v, double c) { return v * c; }
+};
+
 // No odometry (paper section 9.2, eq. 79-81): the state carries the velocities,
-// (x, y, theta, v, omega). The "control" is the velocity increment (dv, domega), nominally zero:
-//   v' = v + dv, omega' = omega + domega                                   (eq. 80)
-//   x += v' cos(theta) dt, y += v' sin(theta) dt, theta += omega' dt       (eq. 81)
-// so sample(s, Control::Zero(), dt, (sigma1, sigma2), n) is exactly eq. 80-81. The sigmas are per
-// step, as in the paper; for a random walk in continuous time pass sigma * sqrt(dt).
-class BrownianVelocityModel : public MotionModelBase<BrownianVelocityModel, 5, 2> {
+// (x, y, theta, v, c), c as `Turn` says (above). The "control" is the increment (dv, dc),
+// nominally zero:
+//   v' = v + dv, c' = c + dc                                                   (eq. 80)
+//   x += v' cos(theta) dt, y += v' sin(theta) dt, theta += rate(v', c') dt     (eq. 81)
+// so sample(s, Control::Zero(), dt, (sigma1, sigma2), n) is exactly eq. 80-81 (for TurnRateWalk;
+// CurvatureWalk walks the curvature of a car's rear axle, whose heading cannot turn at v = 0).
+// The sigmas are per step, as in the paper; for a random walk in continuous time pass
+// sigma * sqrt(dt). The filter ignores the logged controls for these models (kNoOdometry).
+template <class Turn>
+class BrownianModel : public MotionModelBase<BrownianModel<Turn>, 5, 2> {
+  using Base = MotionModelBase<BrownianModel<Turn>, 5, 2>;
+
  public:
+  using typename Base::Control;
+  using typename Base::ControlJacobian;
+  using typename Base::State;
+  using typename Base::StateJacobian;
+  static constexpr bool kNoOdometry = true;
+
   State predict(const State& s, const Control& u, double dt) const {
     const double v = s[3] + u[0];
-    const double w = s[4] + u[1];
+    const double c = s[4] + u[1];
     State out;
     out << s[0] + v * std::cos(s[2]) * dt, s[1] + v * std::sin(s[2]) * dt,
-        wrap_angle(s[2] + w * dt), v, w;
+        wrap_angle(s[2] + Turn::rate(v, c) * dt), v, c;
     return out;
   }
 
   StateJacobian jacobian_pose(const State& s, const Control& u, double dt) const {
     const double v = s[3] + u[0];
-    const double c = std::cos(s[2]);
+    const double cs = std::cos(s[2]);
     const double sn = std::sin(s[2]);
     StateJacobian j = StateJacobian::Identity();
     j(0, 2) = -v * sn * dt;
-    j(0, 3) = c * dt;
-    j(1, 2) = v * c * dt;
+    j(0, 3) = cs * dt;
+    j(1, 2) = v * cs * dt;
     j(1, 3) = sn * dt;
-    j(2, 4) = dt;
+    if constexpr (Turn::kRateDependsOnSpeed) {
+      j(2, 3) = (s[4] + u[1]) * dt;  // d(v' kappa')/dv = kappa'
+      j(2, 4) = v * dt;
+    } else {
+      j(2, 4) = dt;
+    }
     return j;
   }
 
-  ControlJacobian jacobian_control(const State& s, const Control& /*u*/, double dt) const {
+  ControlJacobian jacobian_control(const State& s, const Control& u, double dt) const {
     ControlJacobian j = ControlJacobian::Zero();
     j(0, 0) = std::cos(s[2]) * dt;
     j(1, 0) = std::sin(s[2]) * dt;
-    j(2, 1) = dt;
+    if constexpr (Turn::kRateDependsOnSpeed) {
+      j(2, 0) = (s[4] + u[1]) * dt;
+      j(2, 1) = (s[3] + u[0]) * dt;
+    } else {
+      j(2, 1) = dt;
+    }
     j(3, 0) = 1.0;
     j(4, 1) = 1.0;
     return j;
   }
 };
 
+// The paper's model: state (x, y, theta, v, omega), MotionKind::kBrownian.
+using BrownianVelocityModel = BrownianModel<TurnRateWalk>;
+// Speed and path curvature: state (x, y, theta, v, kappa), MotionKind::kBrownianCurvature.
+using BrownianCurvatureModel = BrownianModel<CurvatureWalk>;
+
 static_assert(MotionModel<BaileyCarModel>);
 static_assert(MotionModel<UnicycleModel>);
 static_assert(MotionModel<VictoriaParkModel>);
 static_assert(MotionModel<BrownianVelocityModel>);
+static_assert(MotionModel<BrownianCurvatureModel>);
 
 }  // namespace fastslam::engine

@@ -32,8 +32,8 @@
 //    candidate, and table 2's alternative (draw a pose from the folded proposal, then score with
 //    Q) is built from the same pieces. `fold` then folds the chosen one.
 //
-// State dimension N: the pose is (x, y, theta) (N = 3); (x, y, theta, v, omega) for the
-// no-odometry model (N = 5, the extra columns of G_s are zero; the velocities are not drawn
+// State dimension N: the pose is (x, y, theta) (N = 3); (x, y, theta, v, omega or kappa) for
+// the no-odometry models (N = 5, the extra columns of G_s are zero; the velocities are not drawn
 // but carried as a Gaussian from scan to scan, `draw_state`); (x, y) for LG-SLAM (N = 2,
 // engine/lg_slam.h). Component 2 is the heading, wrapped to (-pi, pi], when N >= 3.
 //
@@ -235,8 +235,9 @@ inline Eigen::Matrix<double, N, N> rest_given_pose(const Eigen::Matrix<double, N
 // conditioned on the drawn pose: its mean goes into the returned state and its covariance into
 // the lower-right block of `cov_after` (zero elsewhere), where the next prediction starts from.
 // Given the pose path the velocities enter the motion linearly (eq. 81), so this is the
-// Rao-Blackwellised treatment of them (a marginalised particle filter). Drawing them as well
-// would make the next prior treat them as exact: a wrong v or omega could then never be
+// Rao-Blackwellised treatment of them (a marginalised particle filter); with the curvature walk
+// (theta_dot = v kappa, bilinear) it is the same treatment of the linearised motion. Drawing them
+// as well would make the next prior treat them as exact: a wrong v or omega could then never be
 // corrected by a measurement, only by resampling, and FastSLAM 2.0 with one particle diverged
 // on Victoria Park without odometry (docs/victoria-park.md). With F = psd_factor(cov) lower
 // triangular the draw is mean + F n with n's components from 3 on set to zero, and the

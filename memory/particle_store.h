@@ -1,6 +1,7 @@
 // The particles of a filter, stored as columns (structure of arrays).
 //
-// Columns: pose x, y, theta; velocities v, omega (for the no-odometry model, eq. 79-81); the
+// Columns: pose x, y, theta; velocities v, omega (for the no-odometry models, eq. 79-81; the
+// `omega` column holds the curvature kappa for engine::MotionKind::kBrownianCurvature); the
 // log-weight; each particle's map (a persistent `LandmarkTree`, whose size is the particle's
 // landmark count); and each particle's spatial index over that map (a persistent
 // `SpatialIndex`, empty unless the engine keeps one: unknown data association). The numeric

@@ -143,9 +143,12 @@ class Parser {
         } else if (kind == "none") {
           fields(2, "motion none");
           h.motion.kind = MotionKind::kBrownian;
+        } else if (kind == "none-curvature") {
+          fields(2, "motion none-curvature");
+          h.motion.kind = MotionKind::kBrownianCurvature;
         } else {
           fail("unknown motion kind '" + std::string(kind) +
-               "' (bailey-car, victoria-park, unicycle or none)");
+               "' (bailey-car, victoria-park, unicycle, none or none-curvature)");
         }
       } else if (key == "control_noise") {
         once(noise);
@@ -349,6 +352,7 @@ LogWriter::LogWriter(std::ostream& out, const LogHeader& h) : out_(out), last_ti
       break;
     case MotionKind::kUnicycle:
     case MotionKind::kBrownian:
+    case MotionKind::kBrownianCurvature:
       break;
     default:
       throw std::invalid_argument("LogWriter: unknown motion kind");

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <random>
+#include <type_traits>
 #include <vector>
 
 #include <benchmark/benchmark.h>
@@ -39,6 +40,8 @@ struct Inputs {
       columns[lanes + l] = pos(rng);
       columns[2 * lanes + l] = heading(rng);
       if (N == 5) columns[3 * lanes + l] = 3.0;  // Brownian: speed in the state
+      // The curvature walk: a 20 m radius (the omega walk's turn rate stays 0, as before).
+      if constexpr (std::is_same_v<Model, BrownianCurvatureModel>) columns[4 * lanes + l] = 0.05;
     }
     for (double& n : normals) n = gauss(rng);
     // The Brownian model's control is the velocity increment, zero in the filter.
@@ -117,8 +120,10 @@ void shapes(benchmark::internal::Benchmark* b) {
 BENCHMARK(BM_MotionBatchSample<BaileyCarModel>)->Apply(shapes);
 BENCHMARK(BM_MotionBatchSample<VictoriaParkModel>)->Apply(shapes);
 BENCHMARK(BM_MotionBatchSample<BrownianVelocityModel>)->Apply(shapes);
+BENCHMARK(BM_MotionBatchSample<BrownianCurvatureModel>)->Apply(shapes);
 BENCHMARK(BM_MotionBatchPredict<BaileyCarModel>)->Apply(shapes);
 BENCHMARK(BM_MotionBatchPredict<BrownianVelocityModel>)->Apply(shapes);
+BENCHMARK(BM_MotionBatchPredict<BrownianCurvatureModel>)->Apply(shapes);
 BENCHMARK(BM_MotionScalarSample<BaileyCarModel>)->Apply(shapes);
 
 }  // namespace

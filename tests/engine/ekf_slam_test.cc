@@ -342,17 +342,18 @@ TEST(EkfSlamDenseTest, TwoLandmarksMatchTheTextbookEkfOverTheWholeState) {
 // ---- 3. Prediction Jacobians against central differences, every motion model ------------------
 
 TEST(EkfSlamPredictTest, CovarianceIsCentralDifferenceJacobiansOfTheModel) {
-  for (const MotionKind kind : {MotionKind::kBaileyCar, MotionKind::kUnicycle,
-                                MotionKind::kVictoriaPark, MotionKind::kBrownian}) {
+  for (const MotionKind kind :
+       {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kVictoriaPark,
+        MotionKind::kBrownian, MotionKind::kBrownianCurvature}) {
     SCOPED_TRACE(std::string(to_string(kind)));
     FilterConfig config = ekf_config();
     config.motion.kind = kind;
     config.initial_pose[2] = 0.7;
-    config.initial_pose[3] = 2.0;  // v, omega (Brownian)
+    config.initial_pose[3] = 2.0;  // v, omega or kappa (no odometry)
     config.initial_pose[4] = 0.1;
     EkfSlam ekf(config);
     const int d = ekf.pose_dim();
-    ASSERT_EQ(d, kind == MotionKind::kBrownian ? 5 : 3);
+    ASSERT_EQ(d, without_odometry(kind) ? 5 : 3);
     // Build a correlated state: drive, see three landmarks, drive.
     for (int k = 0; k < 10; ++k) ekf.predict({2.0, 0.1}, 0.1);
     ekf.observe(std::vector<Observation>{{10.0, 0.3, 0}, {7.0, -0.5, 1}, {12.0, 1.0, 2}});
@@ -381,12 +382,15 @@ TEST(EkfSlamPredictTest, CovarianceIsCentralDifferenceJacobiansOfTheModel) {
         case MotionKind::kBrownian:
           out.head<5>() = BrownianVelocityModel().predict(s.head<5>(), u, dt);
           break;
+        case MotionKind::kBrownianCurvature:
+          out.head<5>() = BrownianCurvatureModel().predict(s.head<5>(), u, dt);
+          break;
       }
       return out;
     };
     // Brownian motion has no odometry: the control is the (zero-mean) velocity increment.
     const Eigen::Vector2d u =
-        kind == MotionKind::kBrownian ? Eigen::Vector2d::Zero() : Eigen::Vector2d(c.u0, c.u1);
+        without_odometry(kind) ? Eigen::Vector2d::Zero() : Eigen::Vector2d(c.u0, c.u1);
     const double h = 1e-6;
     Eigen::MatrixXd f(x.size(), x.size());
     for (Eigen::Index i = 0; i < x.size(); ++i) {

@@ -299,6 +299,76 @@ TEST(MotionBatchTest, BrownianMatchesTheScalarModel) {
   }
 }
 
+TEST(MotionBatchTest, BrownianCurvatureMatchesTheScalarModel) {
+  std::mt19937_64 rng(6);
+  const BrownianCurvatureModel model;
+  const Eigen::Vector2d sigmas(0.1, 0.01);
+  // Speeds of both signs, curvatures of both signs (radii down to 2 m).
+  auto state = [](std::mt19937_64& r) {
+    BrownianCurvatureModel::State s;
+    s << uniform(r, -300, 300), uniform(r, -300, 300), testing::random_heading(r),
+        uniform(r, -3, 3), uniform(r, -0.5, 0.5);
+    return s;
+  };
+  for (const std::size_t count : kCounts) {
+    auto f = make_fixture<BrownianCurvatureModel>(count, 6, rng, state, [](std::mt19937_64& r) {
+      return ControlStep{uniform(r, -0.1, 0.1), uniform(r, -0.02, 0.02), uniform(r, 0.01, 0.2)};
+    });
+    check_sample(model, f, sigmas);
+    check_predict(model, f, sigmas);
+    check_blocking_invariance(model, f, sigmas);
+  }
+}
+
+// A lane's `terms` are the scalar Jacobians: I + the kJacobianPattern entries == jacobian_pose
+// (so the pattern lists every entry off the identity) and V == jacobian_control.
+template <class Model, class DrawState>
+void check_lane_terms(const Model& model, DrawState&& draw_state, std::mt19937_64& rng) {
+  using L = motion_batch_internal::Lane<Model>;
+  constexpr int N = Model::kStateDim;
+  for (int trial = 0; trial < 200; ++trial) {
+    const typename Model::State s = draw_state(rng);
+    const typename Model::Control u(uniform(rng, -0.5, 3.0), uniform(rng, -0.3, 0.3));
+    const double dt = uniform(rng, 0.01, 0.3);
+    double lane_s[N];
+    for (int k = 0; k < N; ++k) lane_s[k] = s[k];
+    double j[L::kJacobianPattern.size()];
+    double v[N][2];
+    L::terms(model, lane_s, u[0], u[1], dt, j, v);
+    typename Model::StateJacobian lane_j = Model::StateJacobian::Identity();
+    for (std::size_t e = 0; e < L::kJacobianPattern.size(); ++e) {
+      lane_j(L::kJacobianPattern[e][0], L::kJacobianPattern[e][1]) = j[e];
+    }
+    typename Model::ControlJacobian lane_v;
+    for (int r = 0; r < N; ++r) lane_v.row(r) << v[r][0], v[r][1];
+    ASSERT_TRUE(matrices_near(lane_j, model.jacobian_pose(s, u, dt), kTol, kTol))
+        << "s = " << s.transpose() << ", u = " << u.transpose();
+    ASSERT_TRUE(matrices_near(lane_v, model.jacobian_control(s, u, dt), kTol, kTol))
+        << "s = " << s.transpose() << ", u = " << u.transpose();
+    // move == predict.
+    const bool ok = L::move(model, lane_s, u[0], u[1], dt);
+    ASSERT_TRUE(ok);
+    typename Model::State moved;
+    for (int k = 0; k < N; ++k) moved[k] = lane_s[k];
+    expect_states_near<Model>(moved, model.predict(s, u, dt), 0);
+  }
+}
+
+TEST(MotionBatchTest, LaneTermsAreTheScalarJacobians) {
+  std::mt19937_64 rng(7);
+  check_lane_terms(BaileyCarModel(4.0), random_pose, rng);
+  check_lane_terms(UnicycleModel(), random_pose, rng);
+  check_lane_terms(VictoriaParkModel(), random_pose, rng);
+  auto walk = [](std::mt19937_64& r) {
+    Eigen::Matrix<double, 5, 1> s;
+    s << uniform(r, -300, 300), uniform(r, -300, 300), testing::random_heading(r),
+        uniform(r, -3, 3), uniform(r, -0.5, 0.5);
+    return s;
+  };
+  check_lane_terms(BrownianVelocityModel(), walk, rng);
+  check_lane_terms(BrownianCurvatureModel(), walk, rng);
+}
+
 // Lanes outside the vector path's domain take the scalar model (same bits as it), and their
 // neighbours in the group are unaffected: a steering angle beyond 2^20 rad (sin/cos domain) and
 // a heading step of many turns (beyond wrap_near's single shift).
@@ -352,6 +422,26 @@ TEST(MotionBatchTest, LanesOutsideTheVectorDomainUseTheScalarModel) {
     for (int k = 0; k < 3; ++k) EXPECT_EQ(u.state(i)[k], want[k]) << i;
     EXPECT_TRUE(u.state(i)[2] > -kPi && u.state(i)[2] <= kPi);
   }
+}
+
+// The curvature walk's heading step v' kappa' dt of many turns (50 m/s on a 1 m radius for
+// 0.5 s: 25 rad) takes the scalar path, in sample_block and predict_block.
+TEST(MotionBatchTest, CurvatureStepsOfManyTurnsUseTheScalarModel) {
+  const BrownianCurvatureModel model;
+  const Eigen::Vector2d sigmas(0.1, 0.01);
+  std::mt19937_64 rng(8);
+  auto f = make_fixture<BrownianCurvatureModel>(
+      8, 1, rng,
+      [](std::mt19937_64& r) {
+        BrownianCurvatureModel::State s;
+        s << 0.0, 0.0, testing::random_heading(r), 50.0, uniform(r, 0.9, 1.1);
+        return s;
+      },
+      [](std::mt19937_64&) {
+        return ControlStep{0.0, 0.0, 0.5};
+      });
+  check_sample(model, f, sigmas);
+  check_predict(model, f, sigmas);
 }
 
 // Headings crossing the seam at +-pi wrap exactly as wrap_angle does (pi stays pi, -pi maps

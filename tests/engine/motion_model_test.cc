@@ -132,6 +132,41 @@ TEST(BrownianVelocityModelTest, IsPaperEquations80And81) {
   EXPECT_DOUBLE_EQ(next[2], 0.4 + w * dt);
 }
 
+// theta += v' kappa' dt, with v' = v + dv and kappa' = kappa + dkappa.
+TEST(BrownianCurvatureModelTest, IsTheSpeedAndCurvatureWalk) {
+  const BrownianCurvatureModel model;
+  BrownianCurvatureModel::State s;
+  s << 1.0, 2.0, 0.4, 3.0, 0.2;
+  const double dt = 0.2;
+  const double normals[2] = {0.5, -1.0};
+  const Eigen::Vector2d sigmas(0.3, 0.05);
+  const auto next = model.sample(s, Eigen::Vector2d::Zero(), dt, sigmas, normals);
+  const double v = 3.0 + 0.3 * 0.5;
+  const double kappa = 0.2 - 0.05;
+  EXPECT_DOUBLE_EQ(next[3], v);
+  EXPECT_DOUBLE_EQ(next[4], kappa);
+  EXPECT_DOUBLE_EQ(next[0], 1.0 + v * std::cos(0.4) * dt);
+  EXPECT_DOUBLE_EQ(next[1], 2.0 + v * std::sin(0.4) * dt);
+  EXPECT_DOUBLE_EQ(next[2], 0.4 + v * kappa * dt);
+  // Backwards with a left curvature turns right; the heading is wrapped.
+  s << 0.0, 0.0, 3.1, -2.0, -0.5;
+  const auto back = model.predict(s, Eigen::Vector2d(0.0, 0.0), 0.5);
+  EXPECT_DOUBLE_EQ(back[2], wrap_angle(3.1 + 0.5));
+  EXPECT_LT(back[2], 0.0);
+}
+
+// A car at rest cannot turn, whatever its curvature (the omega walk turns at v = 0).
+TEST(BrownianCurvatureModelTest, DoesNotTurnStandingStill) {
+  BrownianCurvatureModel::State s;
+  s << 5.0, -3.0, 1.2, 0.0, 0.3;
+  const auto still = BrownianCurvatureModel().predict(s, Eigen::Vector2d(0.0, 0.1), 1.0);
+  BrownianCurvatureModel::State want = s;
+  want[4] += 0.1;
+  EXPECT_EQ(still, want);
+  const auto spun = BrownianVelocityModel().predict(s, Eigen::Vector2d(0.0, 0.1), 1.0);
+  EXPECT_DOUBLE_EQ(spun[2], 1.2 + 0.4);
+}
+
 // Jacobians of every model against central differences at many random points, a quarter of
 // them with the heading within 1e-3 of +-pi.
 TEST(MotionModelJacobianTest, AllModelsMatchCentralDifferences) {
@@ -144,6 +179,7 @@ TEST(MotionModelJacobianTest, AllModelsMatchCentralDifferences) {
   const UnicycleModel unicycle;
   const VictoriaParkModel victoria;
   const BrownianVelocityModel brownian;
+  const BrownianCurvatureModel curvature;
   const LinearGaussianMotion linear;
   for (int i = 0; i < 500; ++i) {
     const Pose s = random_pose(rng);
@@ -154,6 +190,10 @@ TEST(MotionModelJacobianTest, AllModelsMatchCentralDifferences) {
     BrownianVelocityModel::State b;
     b << s, speed(rng), rate(rng);
     expect_jacobians_match(brownian, b, Eigen::Vector2d(0.1 * rate(rng), 0.1 * rate(rng)), dt);
+    // Speed of both signs, curvature of both signs (up to a 2 m radius), nonzero increments.
+    BrownianCurvatureModel::State k;
+    k << s, speed(rng), 0.5 * rate(rng);
+    expect_jacobians_match(curvature, k, Eigen::Vector2d(0.1 * rate(rng), 0.01 * rate(rng)), dt);
     expect_jacobians_match(linear, s.head<2>().eval(), Eigen::Vector2d(rate(rng), rate(rng)), dt);
     if (HasFailure()) {
       return;

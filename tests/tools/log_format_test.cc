@@ -83,12 +83,17 @@ Log sample_log(engine::MotionKind kind) {
 
 TEST(LogFormat, RoundTripIsBitExactForEveryMotionKind) {
   for (auto kind : {engine::MotionKind::kBaileyCar, engine::MotionKind::kUnicycle,
-                    engine::MotionKind::kVictoriaPark, engine::MotionKind::kBrownian}) {
+                    engine::MotionKind::kVictoriaPark, engine::MotionKind::kBrownian,
+                    engine::MotionKind::kBrownianCurvature}) {
     const Log log = sample_log(kind);
     std::stringstream text;
     write_log(text, log);
     const Log back = read_log(text, "memory");
     EXPECT_TRUE(back == log) << engine::to_string(kind);
+    EXPECT_EQ(back.header.motion.kind, kind);
+    if (kind == engine::MotionKind::kBrownianCurvature) {
+      EXPECT_NE(text.str().find("\nmotion none-curvature\n"), std::string::npos) << text.str();
+    }
     EXPECT_EQ(back.events.size(), log.events.size());
     EXPECT_EQ(std::bit_cast<std::uint64_t>(back.header.start_pose[1]),
               std::bit_cast<std::uint64_t>(4.9e-324));
@@ -170,6 +175,12 @@ TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
       {"fastslam-log 1\nmotion bicycle 4\n", "x.log:2: unknown motion kind 'bicycle'"},
       {"fastslam-log 1\nmotion bailey-car\n", "x.log:2: 'motion' needs 3 fields"},
       {"fastslam-log 1\nmotion bailey-car -4\n", "x.log:2: wheelbase must be > 0"},
+      {"fastslam-log 1\nmotion none-curvature 0.1\n", "x.log:2: 'motion' needs 2 fields"},
+      {"fastslam-log 1\nmotion none_curvature\n",
+       "x.log:2: unknown motion kind 'none_curvature' (bailey-car, victoria-park, unicycle, none "
+       "or none-curvature)"},
+      {"fastslam-log 1\nmotion none-curvature\ncontrol_noise 0.1 -0.01\n",
+       "x.log:3: sigma1 must be >= 0"},
       {"fastslam-log 1\nmotion unicycle\nmotion unicycle\n",
        "x.log:3: header line 'motion' is "
        "repeated"},
