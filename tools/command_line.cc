@@ -120,8 +120,10 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->capture_default_str();
   cmd.add_option("--motion", o.motion,
                  "odometry: the source's motion model; none: ignore the controls, Brownian "
-                 "velocities (eq. 79-81; --sigma-u0/--sigma-u1 are the v and omega increments)")
-      ->check(CLI::IsMember({"odometry", "none"}))
+                 "velocities (eq. 79-81; --sigma-u0/--sigma-u1 are the v and omega increments); "
+                 "none-curvature: the same walking v and the path's curvature (1/m), so the "
+                 "heading cannot turn while the vehicle stands")
+      ->check(CLI::IsMember({"odometry", "none", "none-curvature"}))
       ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(CLI::Range(1U, 100'000'000U))

@@ -421,7 +421,7 @@ void draw_map(const std::string& script, const std::string& out) {
 // filter tracks the axle, the sensor sits at (a, b) from it, and the trajectory is reported at
 // the laser again.
 engine::SensorOffset tracked_point_offset(const RunOptions& o, const LogHeader& h) {
-  if (o.motion != "none" || h.motion.kind != engine::MotionKind::kVictoriaPark) return {};
+  if (o.motion == "odometry" || h.motion.kind != engine::MotionKind::kVictoriaPark) return {};
   return {h.motion.geometry.a, h.motion.geometry.b, 0.0};
 }
 
@@ -435,8 +435,13 @@ engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
     config.motion.kind = engine::MotionKind::kBrownian;
     config.motion.sigma_control[0] = o.no_odometry_sigma[0];
     config.motion.sigma_control[1] = o.no_odometry_sigma[1];
+  } else if (o.motion == "none-curvature") {
+    config.motion.kind = engine::MotionKind::kBrownianCurvature;
+    config.motion.sigma_control[0] = o.no_odometry_sigma[0];
+    config.motion.sigma_control[1] = o.no_odometry_sigma_kappa;
   } else if (o.motion != "odometry") {
-    throw std::invalid_argument("--motion '" + o.motion + "' is not supported (odometry or none)");
+    throw std::invalid_argument("--motion '" + o.motion +
+                                "' is not supported (odometry, none or none-curvature)");
   }
   config.sensor = h.sensor;
   if (o.noise.sigma_range) config.sensor.sigma_range = *o.noise.sigma_range;

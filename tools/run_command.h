@@ -49,6 +49,11 @@ inline constexpr double kDefaultLoopSpacing = 10.0;    // m
 // of the park (GPS RMSE 51 m), 0.15 kept it (5.9 m); docs/victoria-park.md.
 inline constexpr double kNoOdometrySigmaV = 0.15;      // m/s per step
 inline constexpr double kNoOdometrySigmaOmega = 0.05;  // rad/s per step
+// The curvature walk's step (--motion none-curvature), per control. Chosen on Victoria Park by
+// the filter's evidence (GPS-free; FS1, M = 100, seeds 1-10: mean log_evidence 35.7 k at 0.01,
+// 34.7 k at 0.015, seeds lost at 0.0075, every seed at 0.005: the driver turns the wheel from
+// +0.23 to -0.58 rad while standing at 960 s); docs/victoria-park.md.
+inline constexpr double kNoOdometrySigmaKappa = 0.01;  // 1/m per step
 
 // Filter noises that replace the source's (a log header's, or the simulator's).
 struct NoiseOverrides {
@@ -79,9 +84,12 @@ struct RunOptions {
   // "odometry": the source's motion model with its controls; "none": the controls are ignored
   // (only their dt is used) and the pose follows the Brownian velocity model of eq. 79-81
   // (engine::MotionKind::kBrownian), with `no_odometry_sigma` (the per-control increments of v,
-  // m/s, and omega, rad/s; --sigma-u0/--sigma-u1 override them).
+  // m/s, and omega, rad/s; --sigma-u0/--sigma-u1 override them); "none-curvature": the same
+  // with the curvature walked instead of omega (engine::MotionKind::kBrownianCurvature: a car
+  // cannot turn while it stands), steps no_odometry_sigma[0] and `no_odometry_sigma_kappa`.
   std::string motion = "odometry";
   double no_odometry_sigma[2] = {kNoOdometrySigmaV, kNoOdometrySigmaOmega};
+  double no_odometry_sigma_kappa = kNoOdometrySigmaKappa;  // 1/m per control
   // Replaces the source's start heading (rad) when set.
   std::optional<double> initial_heading;
   // --source victoria-park: the reader's options (gate, geometry, heading fit).
@@ -109,7 +117,7 @@ std::string default_plot_script();
 
 // The filter's configuration for a source with header `h` under `options`: the header's
 // models and noises, the options' algorithm, particles, association, ... and noise overrides;
-// with `--motion none` the Brownian model, and on Victoria Park the rear axle tracked with the
+// without odometry the Brownian model, and on Victoria Park the rear axle tracked with the
 // laser at (a, b) from it plus the header's own sensor offset (`tracked_point_offset`).
 engine::FilterConfig filter_config(const RunOptions& options, const LogHeader& h);
 // Where the source's pose is relative to the point the filter tracks: zero, except without

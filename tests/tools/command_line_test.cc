@@ -192,6 +192,7 @@ TEST_F(CommandLine, MotionNoneAndTheStartHeading) {
   ASSERT_TRUE(o.initial_heading.has_value());
   EXPECT_DOUBLE_EQ(*o.initial_heading, std::numbers::pi / 2);
   EXPECT_EQ(o.victoria_park.heading_fit_seconds, 12.0);
+  EXPECT_EQ(run("{}", "--motion none-curvature").motion, "none-curvature");
   EXPECT_NE(error_of("{}", "--motion bogus").find("--motion"), std::string::npos);
   EXPECT_NE(error_of("{}", "--heading-fit-seconds 0").find("--heading-fit-seconds"),
             std::string::npos);

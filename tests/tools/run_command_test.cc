@@ -413,6 +413,18 @@ TEST(RunCommand, FilterConfigComposesTheAxleWithTheHeadersOffset) {
   const engine::SensorOffset axle = tracked_point_offset(o, h);
   EXPECT_EQ(axle.x, 3.78);
   EXPECT_EQ(axle.yaw, 0.0);
+  // The curvature walk: the same tracked axle, its own step for the second component.
+  o.motion = "none-curvature";
+  c = filter_config(o, h);
+  EXPECT_EQ(c.motion.kind, engine::MotionKind::kBrownianCurvature);
+  EXPECT_EQ(c.motion.sigma_control[0], kNoOdometrySigmaV);
+  EXPECT_EQ(c.motion.sigma_control[1], kNoOdometrySigmaKappa);
+  EXPECT_EQ(c.sensor.offset.x, 3.78);
+  EXPECT_NEAR(c.initial_pose[1], 20.0 - 3.78, 1e-12);
+  o.noise.sigma_control1 = 0.02;
+  EXPECT_EQ(filter_config(o, h).motion.sigma_control[1], 0.02);
+  o.motion = "sideways";
+  EXPECT_THROW(filter_config(o, h), std::invalid_argument);
 }
 
 TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
@@ -436,13 +448,15 @@ TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
   g.y = -4.0;
   log.events.push_back(g);
   RunOptions o = log_run(log, "none", 2);
-  o.motion = "none";
-  o.no_odometry_sigma[0] = o.no_odometry_sigma[1] = 0.0;
-  ASSERT_EQ(run_simulation(o), 0);
-  const nlohmann::json m = read_metrics(o.out);
-  EXPECT_EQ(m["motion"], "none");
-  EXPECT_EQ(m["gps_fixes_used"], 1);
-  EXPECT_NEAR(m["gps_rmse_m"].get<double>(), 0.0, 1e-9);
+  o.no_odometry_sigma[0] = o.no_odometry_sigma[1] = o.no_odometry_sigma_kappa = 0.0;
+  for (const char* motion : {"none", "none-curvature"}) {
+    o.motion = motion;
+    ASSERT_EQ(run_simulation(o), 0);
+    const nlohmann::json m = read_metrics(o.out);
+    EXPECT_EQ(m["motion"], motion);
+    EXPECT_EQ(m["gps_fixes_used"], 1);
+    EXPECT_NEAR(m["gps_rmse_m"].get<double>(), 0.0, 1e-9);
+  }
   o.motion = "sideways";
   EXPECT_THROW(run_simulation(o), std::invalid_argument);
   std::filesystem::remove_all(o.out);
