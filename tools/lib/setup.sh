@@ -7,7 +7,7 @@ FASTSLAM_PACKAGES=(
   libtbb-dev libeigen3-dev libjemalloc-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libnanoflann-dev
-  python3 python3-matplotlib
+  python3 python3-numpy python3-matplotlib
 )
 
 fastslam_install_packages() {
