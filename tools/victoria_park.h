@@ -87,9 +87,10 @@ struct VictoriaParkOptions {
   // default: no measurable gain on FS1, M = 100 (docs/victoria-park.md).
   bool split_controls_at_scans = false;
   // The laser's yaw on the car (rad, counter-clockwise): the bearings are taken from the car's
-  // heading plus this. 0 (the data set's README and public code assume an aligned laser); the
-  // odometry runs come out best at -0.25 to -0.5 deg (docs/victoria-park.md), a value fitted
-  // against GPS, so not the default.
+  // heading plus this. 0 (the data set's README and public code assume an aligned laser). No
+  // value is best for every filter: the detections alone give -1.1 deg (tools/vp_calibrate.py),
+  // GPS prefers -0.25 to -0.75 deg depending on the filter, FS2 with one particle 0. Without
+  // odometry it must be set: at 0 the path rotates about 3 deg (docs/victoria-park.md).
   double laser_yaw = 0.0;
 };
 
