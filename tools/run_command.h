@@ -50,9 +50,10 @@ inline constexpr double kDefaultLoopSpacing = 10.0;    // m
 inline constexpr double kNoOdometrySigmaV = 0.15;      // m/s per step
 inline constexpr double kNoOdometrySigmaOmega = 0.05;  // rad/s per step
 // The curvature walk's step (--motion none-curvature), per control. Chosen on Victoria Park by
-// the filter's evidence (GPS-free; FS1, M = 100, seeds 1-10: mean log_evidence 35.7 k at 0.01,
-// 34.7 k at 0.015, seeds lost at 0.0075, every seed at 0.005: the driver turns the wheel from
-// +0.23 to -0.58 rad while standing at 960 s); docs/victoria-park.md.
+// the filter's evidence (GPS-free; FS1, M = 100, --vp-laser-x 3.6, seeds 1-10: mean
+// log_evidence 35.7 k at 0.01, 34.7 k at 0.015, seeds lost at 0.0075, every seed at 0.005:
+// the driver turns the wheel from +0.23 to -0.58 rad while standing at 960 s);
+// docs/victoria-park.md.
 inline constexpr double kNoOdometrySigmaKappa = 0.01;  // 1/m per step
 
 // Filter noises that replace the source's (a log header's, or the simulator's).

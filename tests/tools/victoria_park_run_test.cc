@@ -3,7 +3,7 @@
 // association, one seed. A run is a deterministic function of the seed (and the same for any
 // thread count), so the bounds below are the measured values with a margin, not statistics:
 // docs/victoria-park.md has the numbers over seeds 1-5. FastSLAM 2.0 with one particle, and
-// both versions without odometry too. About 37 s CPU in release (28 s of it without odometry);
+// both versions without odometry too. About 23 s CPU in release;
 // labelled "end-to-end", which the sanitizer presets leave out.
 #include <filesystem>
 #include <fstream>
