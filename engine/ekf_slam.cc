@@ -17,6 +17,7 @@
 #include "engine/angles.h"
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
+#include "engine/motion_dispatch.h"
 #include "engine/motion_model.h"
 
 namespace fastslam::engine {
@@ -174,23 +175,8 @@ struct EkfSlam::Impl {
   }
 
   void predict(const Control& control, double dt) {
-    switch (config.motion.kind) {
-      case MotionKind::kBaileyCar:
-        predict_with(BaileyCarModel(config.motion.wheelbase), control, dt);
-        break;
-      case MotionKind::kUnicycle:
-        predict_with(UnicycleModel(), control, dt);
-        break;
-      case MotionKind::kVictoriaPark:
-        predict_with(VictoriaParkModel(config.motion.geometry), control, dt);
-        break;
-      case MotionKind::kBrownian:
-        predict_with(BrownianVelocityModel(), control, dt);
-        break;
-      case MotionKind::kBrownianCurvature:
-        predict_with(BrownianCurvatureModel(), control, dt);
-        break;
-    }
+    visit_motion(config.motion,
+                 [&](const auto& motion) { predict_with(motion, control, dt); });
   }
 
   // The innovation covariance S of z against landmark `landmark` at the current state, its

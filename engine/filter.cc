@@ -25,6 +25,7 @@
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
 #include "engine/motion_batch.h"
+#include "engine/motion_dispatch.h"
 #include "engine/motion_model.h"
 #include "engine/proposal.h"
 #include "memory/node_heap.h"
@@ -166,23 +167,8 @@ struct Filter::Impl {
 
   // Runs the queued controls and, if given, the planned scan through every particle.
   void run_pass(const std::vector<PlannedObservation>* scan, std::uint64_t scan_step) {
-    switch (config.motion.kind) {
-      case MotionKind::kBaileyCar:
-        run_pass_with(BaileyCarModel(config.motion.wheelbase), scan, scan_step);
-        break;
-      case MotionKind::kUnicycle:
-        run_pass_with(UnicycleModel(), scan, scan_step);
-        break;
-      case MotionKind::kVictoriaPark:
-        run_pass_with(VictoriaParkModel(config.motion.geometry), scan, scan_step);
-        break;
-      case MotionKind::kBrownian:
-        run_pass_with(BrownianVelocityModel(), scan, scan_step);
-        break;
-      case MotionKind::kBrownianCurvature:
-        run_pass_with(BrownianCurvatureModel(), scan, scan_step);
-        break;
-    }
+    visit_motion(config.motion,
+                 [&](const auto& motion) { run_pass_with(motion, scan, scan_step); });
     pending.clear();
   }
 

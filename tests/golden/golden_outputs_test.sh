@@ -1,0 +1,107 @@
+#!/usr/bin/env bash
+# Golden outputs: fixed-seed runs whose trajectory and map files must not change by a single
+# byte. A change meant to change results updates EXPECTED below in the same commit and says
+# why in its message; `--update` prints the new table.
+#
+# usage: golden_outputs_test.sh FASTSLAM_BINARY SHARED_DIR WORK_DIR [--update]
+# Exits 77 (skipped) when SHARED_DIR has no data sets.
+set -euo pipefail
+
+fastslam=$1
+shared=$2
+work=$3
+update=${4:-}
+
+if [ ! -d "$shared/data" ]; then
+  echo "SKIP: $shared/data is absent: the golden runs need ../shared's data sets"
+  exit 77
+fi
+
+EXPECTED='
+webmap_fs1_known/trajectory.csv 4c33374d043eba4f0bc04b4d3d92bab05c999a52177667f6a49cb24b4ad32a56
+webmap_fs1_known/trajectory.tum 2784fbf217ae75cea8fc7afc747561bb794d725d4e1f0c052f4071ec14dc2e65
+webmap_fs1_known/landmarks.csv fbd4bcd4433a1fb90718043ee6c56d8473b732fa5e299ccb93b63a703a4ca32a
+webmap_fs2_known/trajectory.csv 9b52dbd2f0bf875ea43afea195cf583ac21c05789231632aaa215079f54bf918
+webmap_fs2_known/trajectory.tum ca088b2a483b4730093ab610bbb83453e84925aea573b3519e0accd8c354e0f9
+webmap_fs2_known/landmarks.csv c446fc3554d52b968a28b51d52e77dc9891422f38d4c51791cfbdc155af2d4f9
+webmap_fs1_ml/trajectory.csv a053862334ac099869a229b628a81647746f43e3e5aaf13a5637f8233d4417af
+webmap_fs1_ml/trajectory.tum 71862f948317e62d13a927038a38fdbbe6777708cf31fb060592f8102e95917c
+webmap_fs1_ml/landmarks.csv f6beef56641e063f89c3591e1055644d01c15a5ea49db1117fb787b94d6c5840
+webmap_fs2_das/trajectory.csv a85f1945225ea1220fad459f9d9ba88ac50f7e0d6c36af32ae4e68d88ad2fd1b
+webmap_fs2_das/trajectory.tum 847de863f6acf8b326a8c444d3dc8dee017ada05333bc64fed7ba6a873971bd3
+webmap_fs2_das/landmarks.csv 6c9ef60142f45f8c831a5c96b41f0fb96e0556c25d140bf1b420b9ccfdc02a67
+webmap_ekf_ml/trajectory.csv 419cb225c15413c30bdf246acd828ba3f994f06696659dddcadca818e5cdec4a
+webmap_ekf_ml/trajectory.tum 5c089734c56a4c2a580030ad77987be6bb64cfd02aa144a8f31f061e716a78bc
+webmap_ekf_ml/landmarks.csv 44ee0843c45b8696427fa74ede132c549f2077ceb25ce7a4423c42da99042d0a
+loop_fs1_ml_clutter/trajectory.csv 4a7066de2d67d49bf8fef58b639de875d4f72cc2ee3e184f97c0df13ae0f6128
+loop_fs1_ml_clutter/trajectory.tum d0111aecf3607b1e0bac08cf12a8ddad30935694be14b3263f3599f1422ece76
+loop_fs1_ml_clutter/landmarks.csv e636812dc3d61a30c5a54495d100b9cb58651197fb157cce7d5d0a60970554ac
+grid_fs2_known/trajectory.csv 35882f177524c64cbfdca62662a721228e151f55f9d6d081d3305aa9b68005b2
+grid_fs2_known/trajectory.tum 825842130adfe0edeff1cbdb6c39ee3df5b747389fd303e0fc348820683e2b3b
+grid_fs2_known/landmarks.csv 874feab9a0be89db66e2762d1a45414f0612ed825af0dda47826d248d8ad43b1
+victoria_park_fs1_ml/trajectory.csv 96f2e99e2a5b13c6e420517bf1f4a28804ee396f5c6cfef3aaa0aa5b9a8d0adb
+victoria_park_fs1_ml/trajectory.tum 35c4847c8d9b177e149db431fa57d46dc06e9d5a5406f2037888c41fdc1bb791
+victoria_park_fs1_ml/landmarks.csv c5520b49517ff674b17fd9c71581c6c0eb1e649a2d7d47b4338e680422e00bad
+victoria_park_fs2_none/trajectory.csv ecaf3c078f48b460826bf86d5289a49b3c87ddd1514e8be1c39bb875268080a4
+victoria_park_fs2_none/trajectory.tum 42e90d2bade3022b29c7ef8404eec8e8694a5943c2d9239867f532bb4706193a
+victoria_park_fs2_none/landmarks.csv 3d80165103aae0e4d27330154801da15d9aafae4dbab6375578a3f9a7ab2f26f
+'
+
+# run_case NAME ARGS...: one run into $work/NAME.
+run_case() {
+  local name=$1
+  shift
+  rm -rf "${work:?}/$name"
+  "$fastslam" run "$@" --seed 7 --threads 2 --no-progress --no-plot --out "$work/$name" \
+    >"$work/$name.log" 2>&1 || {
+    cat "$work/$name.log" >&2
+    echo "FAILED: $name: fastslam run exited non-zero" >&2
+    exit 1
+  }
+}
+
+mkdir -p "$work"
+webmap=(--landmarks-csv "$shared/data/bailey_sim/example_webmap_landmarks.csv"
+        --waypoints-csv "$shared/data/bailey_sim/example_webmap_waypoints.csv")
+run_case webmap_fs1_known "${webmap[@]}" --algorithm fastslam1 --particles 100 --association known
+run_case webmap_fs2_known "${webmap[@]}" --algorithm fastslam2 --particles 100 --association known
+run_case webmap_fs1_ml "${webmap[@]}" --algorithm fastslam1 --particles 50 --association ml
+run_case webmap_fs2_das "${webmap[@]}" --algorithm fastslam2 --particles 50 --association das
+run_case webmap_ekf_ml "${webmap[@]}" --algorithm ekf --association ml
+run_case loop_fs1_ml_clutter --world loop --loops 1 --clutter 1 --algorithm fastslam1 \
+  --particles 30 --association ml
+run_case grid_fs2_known --world grid --landmarks 2000 --algorithm fastslam2 --particles 20
+vp=(--source victoria-park --data "$shared/data/victoria_park")
+run_case victoria_park_fs1_ml "${vp[@]}" --algorithm fastslam1 --particles 30 --association ml
+run_case victoria_park_fs2_none "${vp[@]}" --algorithm fastslam2 --motion none --particles 20 \
+  --association ml --sigma-range 0.7 --sigma-bearing 0.03
+
+actual=""
+for dir in webmap_fs1_known webmap_fs2_known webmap_fs1_ml webmap_fs2_das webmap_ekf_ml \
+  loop_fs1_ml_clutter grid_fs2_known victoria_park_fs1_ml victoria_park_fs2_none; do
+  for file in trajectory.csv trajectory.tum landmarks.csv; do
+    sum=$(sha256sum "$work/$dir/$file" | cut -d' ' -f1)
+    actual+="$dir/$file $sum"$'\n'
+  done
+done
+
+if [ "$update" = "--update" ]; then
+  printf '%s' "$actual"
+  exit 0
+fi
+
+status=0
+while read -r path sum; do
+  [ -n "$path" ] || continue
+  want=$(printf '%s\n' "$EXPECTED" | awk -v p="$path" '$1 == p {print $2}')
+  if [ -z "$want" ]; then
+    echo "FAILED: $path has no golden value (run with --update and record it)"
+    status=1
+  elif [ "$want" != "$sum" ]; then
+    echo "FAILED: $path changed: sha256 $sum, golden $want"
+    status=1
+  else
+    echo "ok: $path"
+  fi
+done <<<"$actual"
+exit $status
