@@ -1,0 +1,284 @@
+#!/usr/bin/python3
+"""Measures the tables of docs/results.md and writes it.
+
+Every row is a command: accuracy rows run `fastslam run` over seeds (mean, median, worst of the
+metric, never one seed); speed rows run a Google Benchmark binary with repetitions and keep the
+median. Raw measurements (per seed, per repetition, with the machine and the date) are kept in
+docs/results.json, so re-measuring one section leaves the others as they were measured:
+
+    /usr/bin/python3 tools/scripts/results.py --run accuracy   # fastslam run over seeds
+    /usr/bin/python3 tools/scripts/results.py --run speed      # benchmarks (an idle machine!)
+    /usr/bin/python3 tools/scripts/results.py                  # re-render from results.json
+
+Paths are relative to the repository root; ../shared must be beside it.
+"""
+
+import argparse
+import concurrent.futures
+import datetime
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SHARED = os.path.normpath(os.path.join(ROOT, "..", "shared"))
+WEBMAP = ("--landmarks-csv ../shared/data/bailey_sim/example_webmap_landmarks.csv "
+          "--waypoints-csv ../shared/data/bailey_sim/example_webmap_waypoints.csv")
+VP = "--source victoria-park --data ../shared/data/victoria_park"
+SEEDS = list(range(1, 11))
+
+# Accuracy tables: (table id, title, metric keys shown, note, rows); a row is (label, arguments).
+ACCURACY = [
+    ("webmap", "Bailey's webmap (simulated, 35 landmarks, 17382 controls), M = 100",
+     ["pose_rmse_m", "landmark_rmse_m"],
+     "pose RMSE: RMS over every control step of the weighted-mean position against truth; "
+     "landmark RMSE: the most likely particle's map against the truth (known ids: by id; ml/das: "
+     "landmarks paired within --match-radius 5 m, so read it beside the matched count).",
+     [("FastSLAM 1.0, known ids", f"{WEBMAP} --algorithm fastslam1 --association known"),
+      ("FastSLAM 2.0, known ids", f"{WEBMAP} --algorithm fastslam2 --association known"),
+      ("FastSLAM 1.0, ML", f"{WEBMAP} --algorithm fastslam1 --association ml"),
+      ("FastSLAM 2.0, ML", f"{WEBMAP} --algorithm fastslam2 --association ml"),
+      ("FastSLAM 1.0, DAS", f"{WEBMAP} --algorithm fastslam1 --association das"),
+      ("FastSLAM 2.0, DAS", f"{WEBMAP} --algorithm fastslam2 --association das"),
+      ("FastSLAM 2.0, M = 1, known ids", f"{WEBMAP} --algorithm fastslam2 --particles 1"),
+      ("EKF-SLAM, known ids", f"{WEBMAP} --algorithm ekf --association known"),
+      ("EKF-SLAM, ML", f"{WEBMAP} --algorithm ekf --association ml")]),
+    ("victoria-park", "Victoria Park (real, 61945 controls, 7249 scans, 4466 GPS fixes)",
+     ["gps_rmse_m", "gps_rmse_aligned_m", "landmarks"],
+     "GPS RMSE over every fix, the estimate interpolated at the fix's time; aligned: after the "
+     "best rigid (SE(2)) fit of the path onto GPS; landmarks: in the most likely particle's map.",
+     [("FastSLAM 1.0, M = 100, ML (the source's defaults)",
+       f"{VP} --algorithm fastslam1 --particles 100 --association ml"),
+      ("FastSLAM 1.0, M = 100, ML, no negative information",
+       f"{VP} --algorithm fastslam1 --particles 100 --association ml --no-negative-information"),
+      ("FastSLAM 2.0, M = 1, ML", f"{VP} --algorithm fastslam2 --particles 1 --association ml"),
+      ("FastSLAM 2.0, M = 100, ML, 0.7 m / 0.03 rad",
+       f"{VP} --algorithm fastslam2 --particles 100 --association ml "
+       "--sigma-range 0.7 --sigma-bearing 0.03"),
+      ("FastSLAM 2.0, M = 100, ML, 0.7 m / 0.03 rad, no odometry",
+       f"{VP} --algorithm fastslam2 --particles 100 --association ml --motion none "
+       "--sigma-range 0.7 --sigma-bearing 0.03"),
+      ("FastSLAM 1.0, M = 100, ML, laser yaw -0.5 deg",
+       f"{VP} --algorithm fastslam1 --particles 100 --association ml --vp-laser-yaw-deg -0.5"),
+      ("FastSLAM 1.0, M = 300, ML, no odometry, laser yaw -0.5 deg",
+       f"{VP} --algorithm fastslam1 --particles 300 --association ml --motion none "
+       "--vp-laser-yaw-deg -0.5"),
+      ("FastSLAM 1.0, M = 300, ML, curvature walk, laser yaw -0.5 deg",
+       f"{VP} --algorithm fastslam1 --particles 300 --association ml --motion none-curvature "
+       "--vp-laser-yaw-deg -0.5"),
+      ("dead reckoning (M = 1, no control noise)",
+       f"{VP} --algorithm fastslam1 --particles 1 --sigma-u0 0 --sigma-u1 0 --association ml "
+       "--no-negative-information")]),
+]
+
+# The README's short table: (table id, row label, metric key, metric name).
+README_ROWS = [
+    ("webmap", "FastSLAM 1.0, known ids", "pose_rmse_m", "pose RMSE, m"),
+    ("webmap", "FastSLAM 2.0, known ids", "pose_rmse_m", "pose RMSE, m"),
+    ("webmap", "FastSLAM 2.0, ML", "pose_rmse_m", "pose RMSE, m"),
+    ("webmap", "EKF-SLAM, known ids", "pose_rmse_m", "pose RMSE, m"),
+    ("victoria-park", "FastSLAM 1.0, M = 100, ML (the source's defaults)", "gps_rmse_m",
+     "GPS RMSE, m"),
+    ("victoria-park", "FastSLAM 2.0, M = 1, ML", "gps_rmse_m", "GPS RMSE, m"),
+    ("victoria-park", "FastSLAM 1.0, M = 300, ML, no odometry, laser yaw -0.5 deg", "gps_rmse_m",
+     "GPS RMSE, m"),
+]
+README_BEGIN = "<!-- results.py: begin -->"
+README_END = "<!-- results.py: end -->"
+
+# Speed tables: (table id, title, binary, filter, note); the median of the repetitions of each
+# benchmark the filter selects, in the benchmark's own time unit.
+SPEED = [
+    ("filter", "The whole webmap filter loop (17382 controls, 1931 scans)",
+     "bench/engine/filter_benchmark", "Webmap", "wall time of the filter loop (no simulation)"),
+    ("association", "Unknown association against map size (ML, M = 100, one thread)",
+     "bench/engine/association_benchmark", ".", "time per scan; maps pre-grown by set_map"),
+    ("landmark-tree", "Persistent landmark tree: one update of an N-landmark map",
+     "bench/memory/landmark_tree_benchmark", "BM_LandmarkTreeUpdate|BM_LinearMapUpdate",
+     "shared: path copied; unshared: changed in place; linear: a flat array copied whole"),
+    ("spatial-index", "Spatial index queries",
+     "bench/memory/spatial_index_benchmark", "Query|Footprint", ""),
+    ("resample", "Systematic resampling",
+     "bench/parallel/resample_benchmark", "BM_SystematicResample/", ""),
+]
+
+
+def machine():
+    model = "unknown CPU"
+    flags = set()
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("model name") and model == "unknown CPU":
+                model = line.split(":", 1)[1].strip()
+            if line.startswith("flags") and not flags:
+                flags = set(line.split(":", 1)[1].split())
+    simd = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
+    return f"{model} ({simd}), {os.cpu_count()} cores, {platform.system()} {platform.release()}"
+
+
+def run_seed(fastslam, args, seed):
+    with tempfile.TemporaryDirectory() as out:
+        cmd = ([fastslam, "run"] + args.split() +
+               ["--seed", str(seed), "--threads", "1", "--no-progress", "--no-plot", "--out", out])
+        subprocess.run(cmd, cwd=ROOT, check=True, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.PIPE)
+        with open(os.path.join(out, "metrics.json")) as f:
+            return json.load(f)
+
+
+def measure_accuracy(fastslam, jobs):
+    tables = {}
+    for table_id, _, keys, _, rows in ACCURACY:
+        measured = []
+        for label, args in rows:
+            with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
+                runs = list(pool.map(lambda s, a=args: run_seed(fastslam, a, s), SEEDS))
+            values = {k: [r.get(k) for r in runs] for k in keys + ["matched_landmarks"]}
+            measured.append({"label": label, "args": args, "seeds": SEEDS, "values": values})
+            print(f"{table_id}: {label}: done", file=sys.stderr)
+        tables[table_id] = measured
+    return tables
+
+
+def measure_speed(build, repetitions):
+    tables = {}
+    for table_id, _, binary, bench_filter, _ in SPEED:
+        path = os.path.join(build, binary)
+        out = subprocess.run(
+            [path, f"--benchmark_filter={bench_filter}",
+             f"--benchmark_repetitions={repetitions}", "--benchmark_report_aggregates_only=true",
+             "--benchmark_format=json"], cwd=ROOT, check=True, capture_output=True, text=True)
+        rows = []
+        for b in json.loads(out.stdout)["benchmarks"]:
+            if b.get("aggregate_name") == "median":
+                rows.append({"name": b["run_name"], "real_time": b["real_time"],
+                             "cpu_time": b["cpu_time"], "unit": b["time_unit"]})
+        tables[table_id] = {"command": f"build/release/{binary} --benchmark_filter='{bench_filter}' "
+                                       f"--benchmark_repetitions={repetitions}", "rows": rows}
+        print(f"{table_id}: done", file=sys.stderr)
+    return tables
+
+
+def fmt(x, integer=False):
+    if x is None:
+        return "-"
+    if integer:
+        return f"{x:.0f}"
+    return f"{x:.2f}"
+
+
+def summary(values):
+    clean = [v for v in values if v is not None]
+    if not clean:
+        return "-"
+    integer = all(isinstance(v, int) for v in clean)
+    return (f"{fmt(statistics.mean(clean), integer)} / {fmt(statistics.median(clean), integer)} / "
+            f"{fmt(max(clean), integer)}")
+
+
+def render(data):
+    lines = ["# Results", "",
+             "Every number here was measured by `tools/scripts/results.py` (the command of each "
+             "table is below it); accuracy over seeds 1-10 as mean / median / worst, never one "
+             "seed. Raw values per seed are in `docs/results.json`. Studies with their own "
+             "scripts: the paper's experiments (`docs/experiments.md`, "
+             "`tools/scripts/experiment.py`), scaling in N, M and threads (`docs/scaling.md`, "
+             "`fastslam bench scaling`), Victoria Park in depth (`docs/victoria-park.md`).", ""]
+    acc = data.get("accuracy")
+    if acc:
+        lines += ["## Accuracy", "", f"Measured {acc['date']} on {acc['machine']} with "
+                  f"`fastslam run ARGS --seed S --threads 1` (results do not depend on the "
+                  f"thread count).", ""]
+        for table_id, title, keys, note, _ in ACCURACY:
+            rows = acc["tables"].get(table_id)
+            if not rows:
+                continue
+            lines += [f"### {title}", "", note, "",
+                      "| run | " + " | ".join(f"{k} (mean / median / worst)" for k in keys) + " |",
+                      "|---|" + "---|" * len(keys)]
+            for row in rows:
+                lines.append(f"| {row['label']} | " +
+                             " | ".join(summary(row["values"][k]) for k in keys) + " |")
+            prefix = os.path.commonprefix([row["args"] for row in rows])
+            prefix = prefix[:prefix.rfind(" --") + 1] if " --" in prefix else ""
+            lines += ["", f"Command: `fastslam run {prefix.strip()} ARGS --seed S --threads 1` "
+                      "for S = 1..10, with ARGS:", ""]
+            lines += [f"- {row['label']}: `{row['args'][len(prefix):]}`" for row in rows]
+            lines.append("")
+    speed = data.get("speed")
+    if speed:
+        lines += ["## Speed", "", f"Measured {speed['date']} on {speed['machine']}: medians of "
+                  "Google Benchmark repetitions, release preset (`-O3 -march=native`, jemalloc). "
+                  "Compare as ratios within a table.", ""]
+        for table_id, title, _, _, note in SPEED:
+            t = speed["tables"].get(table_id)
+            if not t:
+                continue
+            lines += [f"### {title}", "", f"`{t['command']}`" + (f": {note}." if note else ""), "",
+                      "| benchmark | real time | CPU time |", "|---|---|---|"]
+            for r in t["rows"]:
+                lines.append(f"| `{r['name']}` | {r['real_time']:.4g} {r['unit']} | "
+                             f"{r['cpu_time']:.4g} {r['unit']} |")
+            lines.append("")
+    return "\n".join(lines)
+
+
+def readme_table(data):
+    titles = {table_id: title.split(" (")[0] for table_id, title, _, _, _ in ACCURACY}
+    lines = ["| run | metric | mean / median / worst |", "|---|---|---|"]
+    for table_id, label, key, name in README_ROWS:
+        for row in data["accuracy"]["tables"].get(table_id, []):
+            if row["label"] == label:
+                lines.append(f"| {titles[table_id]}: {label} | {name} | "
+                             f"{summary(row['values'][key])} |")
+    return "\n".join(lines)
+
+
+def update_readme(data):
+    path = os.path.join(ROOT, "README.md")
+    with open(path) as f:
+        text = f.read()
+    begin, end = text.find(README_BEGIN), text.find(README_END)
+    if begin < 0 or end < begin or "accuracy" not in data:
+        return
+    text = text[:begin + len(README_BEGIN)] + "\n" + readme_table(data) + "\n" + text[end:]
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--run", choices=["accuracy", "speed", "all"], help="measure anew")
+    parser.add_argument("--build", default=os.path.join(ROOT, "build", "release"))
+    parser.add_argument("--jobs", type=int, default=2, help="seeds run at once (accuracy)")
+    parser.add_argument("--repetitions", type=int, default=5, help="benchmark repetitions")
+    parser.add_argument("--json", default=os.path.join(ROOT, "docs", "results.json"))
+    parser.add_argument("--out", default=os.path.join(ROOT, "docs", "results.md"))
+    opts = parser.parse_args()
+    data = {}
+    if os.path.exists(opts.json):
+        with open(opts.json) as f:
+            data = json.load(f)
+    if opts.run and not os.path.isdir(os.path.join(SHARED, "data")):
+        sys.exit(f"results.py: {SHARED}/data is absent: the accuracy tables need ../shared")
+    stamp = {"date": datetime.date.today().isoformat(), "machine": machine()}
+    if opts.run in ("accuracy", "all"):
+        fastslam = os.path.join(opts.build, "tools", "fastslam")
+        data["accuracy"] = dict(stamp, tables=measure_accuracy(fastslam, opts.jobs))
+    if opts.run in ("speed", "all"):
+        data["speed"] = dict(stamp, tables=measure_speed(opts.build, opts.repetitions))
+    with open(opts.json, "w") as f:
+        json.dump(data, f, indent=1, sort_keys=True)
+        f.write("\n")
+    with open(opts.out, "w") as f:
+        f.write(render(data) + "\n")
+    update_readme(data)
+    print(f"wrote {opts.out} and README.md's results table", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
