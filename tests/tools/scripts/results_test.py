@@ -1,0 +1,76 @@
+#!/usr/bin/python3
+"""tools/scripts/results.py: the summaries, the rendering, and that the committed
+docs/results.md and README.md's table are exactly what docs/results.json renders to."""
+
+import importlib.util
+import os
+import sys
+import unittest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+spec = importlib.util.spec_from_file_location(
+    "results", os.path.join(ROOT, "tools", "scripts", "results.py"))
+results = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(results)
+
+
+class Summary(unittest.TestCase):
+    def test_mean_median_worst(self):
+        self.assertEqual(results.summary([1.0, 2.0, 6.0]), "3.00 / 2.00 / 6.00")
+
+    def test_integers_stay_integers(self):
+        self.assertEqual(results.summary([486, 487, 490]), "488 / 487 / 490")
+
+    def test_missing_values_are_skipped(self):
+        self.assertEqual(results.summary([None, 4.0]), "4.00 / 4.00 / 4.00")
+        self.assertEqual(results.summary([None]), "-")
+
+
+class Render(unittest.TestCase):
+    def fixture(self):
+        rows = []
+        for label, args in results.ACCURACY[0][4][:2]:
+            rows.append({"label": label, "args": args, "seeds": [1, 2],
+                         "values": {"pose_rmse_m": [1.0, 3.0], "landmark_rmse_m": [2.0, 2.0],
+                                    "matched_landmarks": [None, None]}})
+        return {"accuracy": {"date": "2026-01-01", "machine": "test machine",
+                             "tables": {"webmap": rows}}}
+
+    def test_rows_commands_and_machine(self):
+        text = results.render(self.fixture())
+        self.assertIn("test machine", text)
+        self.assertIn("| FastSLAM 1.0, known ids | 2.00 / 2.00 / 3.00 | 2.00 / 2.00 / 2.00 |",
+                      text)
+        self.assertIn("- FastSLAM 2.0, known ids: `--algorithm fastslam2 --association known`",
+                      text)
+        self.assertIn("example_webmap_waypoints.csv ARGS --seed S", text)
+        self.assertNotIn("### Victoria Park", text)  # tables without measurements are left out
+
+    def test_readme_table(self):
+        table = results.readme_table(self.fixture())
+        self.assertIn("| Bailey's webmap: FastSLAM 1.0, known ids | pose RMSE, m | "
+                      "2.00 / 2.00 / 3.00 |", table)
+
+
+class Committed(unittest.TestCase):
+    """What is committed is what the measurements render to: no number edited by hand."""
+
+    def setUp(self):
+        import json
+        with open(os.path.join(ROOT, "docs", "results.json")) as f:
+            self.data = json.load(f)
+
+    def test_results_md(self):
+        with open(os.path.join(ROOT, "docs", "results.md")) as f:
+            self.assertEqual(f.read(), results.render(self.data) + "\n")
+
+    def test_readme(self):
+        with open(os.path.join(ROOT, "README.md")) as f:
+            readme = f.read()
+        begin = readme.index(results.README_BEGIN) + len(results.README_BEGIN)
+        end = readme.index(results.README_END)
+        self.assertEqual(readme[begin:end].strip(), results.readme_table(self.data))
+
+
+if __name__ == "__main__":
+    sys.exit(unittest.main())
