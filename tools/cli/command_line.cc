@@ -60,6 +60,25 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::Range(1, 1000));
 }
 
+// The source's recommended filter settings, for each option the user did not give.
+template <class Given>
+void apply_filter_defaults(const FilterDefaults& d, const Given& given, RunOptions& o) {
+  if (d.existence_range_margin && !given("--existence-range-margin")) {
+    o.filter.existence.range_margin = *d.existence_range_margin;
+  }
+  if (d.existence_missed && !given("--existence-missed")) {
+    o.filter.existence.missed = *d.existence_missed;
+  }
+  if (o.filter.algorithm == Algorithm::kFastSlam2) {
+    if (d.fastslam2_sigma_range && !given("--sigma-range")) {
+      o.noise.sigma_range = d.fastslam2_sigma_range;
+    }
+    if (d.fastslam2_sigma_bearing && !given("--sigma-bearing")) {
+      o.noise.sigma_bearing = d.fastslam2_sigma_bearing;
+    }
+  }
+}
+
 void add_config_option(CLI::App& cmd, RunWords& w) {
   cmd.add_option("--config", w.config,
                  "JSON file of options (keys = long flag names without dashes); flags win")
@@ -110,10 +129,13 @@ void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
 
 void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   engine::FilterConfig& f = o.filter;
-  cmd.add_option("--source", o.source, "where events come from: a simulated world or a native log")
-      ->check(CLI::IsMember({"sim", "log", "victoria-park"}))
+  cmd.add_option("--source", o.source,
+                 "where events come from: a simulated world, a native log or a data set")
+      ->check(CLI::IsMember(source_names()))
       ->capture_default_str();
-  cmd.add_option("--data", o.data, "with --source log: the log file (docs/log-format.md)");
+  cmd.add_option("--data", o.data,
+                 "a recorded source's file or directory: the log file (docs/log-format.md) or "
+                 "the data set's directory");
   add_world_options(cmd, o, w);
   cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
       ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
@@ -227,13 +249,12 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
 
 void add_convert_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   o.source = "sim";
-  cmd.add_option("--source", o.source, "what to convert: a simulated world or Victoria Park")
-      ->check(CLI::IsMember({"sim", "victoria-park"}))
+  cmd.add_option("--source", o.source, "what to convert: a simulated world or a data set")
+      ->check(CLI::IsMember(source_names()))
       ->capture_default_str();
   cmd.add_option("--data", o.data,
-                 "with --source victoria-park: the data set's directory, e.g. "
-                 "../shared/data/victoria_park")
-      ->check(CLI::ExistingDirectory);
+                 "a recorded source's file or directory, e.g. ../shared/data/victoria_park")
+      ->check(CLI::ExistingPath);
   add_world_options(cmd, o, w);
   cmd.add_option("--seed", o.filter.seed, "random seed of the simulation")->capture_default_str();
   add_victoria_park_options(cmd, o, w);
@@ -304,16 +325,8 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   if (given("--sigma-bearing")) o.noise.sigma_bearing = w.sigma_bearing;
   if (given("--sigma-u0")) o.noise.sigma_control0 = w.sigma_control0;
   if (given("--sigma-u1")) o.noise.sigma_control1 = w.sigma_control1;
-  if (o.source == "victoria-park") {
-    const VictoriaParkFilterDefaults vp;
-    if (!given("--existence-range-margin")) {
-      o.filter.existence.range_margin = vp.existence_range_margin;
-    }
-    if (!given("--existence-missed")) o.filter.existence.missed = vp.existence_missed;
-    if (o.filter.algorithm == Algorithm::kFastSlam2) {
-      if (!given("--sigma-range")) o.noise.sigma_range = vp.fastslam2_sigma_range;
-      if (!given("--sigma-bearing")) o.noise.sigma_bearing = vp.fastslam2_sigma_bearing;
-    }
+  for (const SourceEntry& source : sources()) {
+    if (source.name == o.source) apply_filter_defaults(source.defaults, given, o);
   }
   if (given("--vp-min-bearing-deg")) {
     o.victoria_park.gate.min_bearing = w.vp_min_bearing_deg * std::numbers::pi / 180;

@@ -9,7 +9,6 @@
 
 #include "tools/cli/command_line.h"
 #include "tools/cli/run_command.h"
-#include "tools/memory_demo.h"
 #include "tools/studies/lg_slam_experiment.h"
 #include "tools/studies/scaling_study.h"
 
@@ -29,27 +28,8 @@ int main(int argc, char** argv) {
   fastslam::tools::RunOptions convert;
   fastslam::tools::RunWords convert_words;
   CLI::App* convert_cmd = app.add_subcommand(
-      "convert", "write a simulated world or the Victoria Park data set as a native log file");
+      "convert", "write any source (a simulated world, a data set) as a native log file");
   fastslam::tools::add_convert_options(*convert_cmd, convert, convert_words);
-
-  fastslam::tools::MemoryDemoOptions demo;
-  CLI::App* demo_cmd = app.add_subcommand(
-      "memory-demo",
-      "M particles share one N-landmark map, each changes K landmarks a step, then a random "
-      "resampling; prints live memory against one map and the linear baseline");
-  demo_cmd->add_option("--landmarks", demo.landmarks, "landmarks in the shared map (N)")
-      ->check(CLI::Range(1ULL, 100'000'000ULL));
-  demo_cmd->add_option("--particles", demo.particles, "particles (M)")
-      ->check(CLI::Range(1U, 10'000'000U));
-  demo_cmd->add_option("--steps", demo.steps, "steps")->check(CLI::Range(1U, 1'000'000U));
-  demo_cmd
-      ->add_option("--updates-per-step", demo.updates_per_step,
-                   "landmarks each particle changes per step (K)")
-      ->check(CLI::Range(0U, 1'000'000U));
-  demo_cmd->add_option("--seed", demo.seed, "random seed");
-  demo_cmd->add_option("--threads", demo.threads, "worker threads (0: all cores)")
-      ->check(CLI::Range(0, 1024));
-  demo_cmd->add_option("--out", demo.out, "directory to write metrics.json into");
 
   // fastslam bench scaling: the scaling study in N (tools/studies/scaling_study.h).
   CLI::App* bench_cmd = app.add_subcommand("bench", "throughput studies");
@@ -159,7 +139,6 @@ int main(int argc, char** argv) {
       return fastslam::tools::convert_to_log(convert);
     }
     if (lg_cmd->parsed()) return fastslam::tools::run_lg_slam_command(lg);
-    if (demo_cmd->parsed()) return fastslam::tools::run_memory_demo(demo);
     if (scaling_cmd->parsed()) {
       using fastslam::engine::Algorithm;
       using fastslam::engine::Association;

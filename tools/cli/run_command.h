@@ -1,18 +1,12 @@
-// `fastslam run`: a source of events (a simulated world: Bailey's CSV maps, or a procedural
-// grid or loop of any size; or a native log file, tools/io/log_format.h) driven through the Filter
-// by one loop, with the metrics, the estimated trajectory and the final map written to an
-// output directory; and `fastslam convert`, which writes a source into a native log.
-//
-// Metrics against truth, whichever the source holds: pose RMSE against truth poses, landmark
-// RMSE against truth landmarks (by id under known association, else to the nearest true
-// landmark), GPS RMSE against GPS fixes. The estimate at a truth or GPS time is the
-// weighted-mean pose after the controls up to it, linearly interpolated between the two
-// estimates around it, and the fix is skipped (counted in gps_fixes_skipped) when those are
-// more than kMaxInterpolationGap apart or it lies outside the run.
+// `fastslam run`: events from a source (tools/datasets/source.h: a simulated world, a native
+// log, Victoria Park, ...) driven through the Filter or the EKF-SLAM baseline by one loop,
+// scored against whatever truth the source holds (tools/eval/), with the metrics, trajectory
+// and map written to an output directory (tools/cli/run_output.h); and `fastslam convert`,
+// which writes any source as a native log.
 //
 // Ownership: plain options in; files out. Thread safety: one run per call; the filter runs its
-// own threads. Costs: the source plus the filter, O(steps x particles) and O(scans x
-// particles x observations x log N); memory O(steps) for the trajectory and the truth.
+// own threads. Costs: the source's plus the filter's; memory O(steps) for the trajectory and
+// the truth.
 #pragma once
 
 #include <cstdint>
@@ -20,40 +14,18 @@
 #include <string>
 
 #include "engine/filter_config.h"
+#include "tools/datasets/sim_source.h"
+#include "tools/datasets/source.h"
 #include "tools/datasets/victoria_park.h"
 #include "tools/sim/simulator.h"
 
 namespace fastslam::tools {
 
-// Estimates more than this far apart in time are not interpolated between (seconds): a truth
-// pose or GPS fix falling in such a gap of the estimate is skipped. One second is 40 odometry
-// periods of Victoria Park and 40 control steps of Bailey's simulator.
-inline constexpr double kMaxInterpolationGap = 1.0;
-
-// The built-in default of `fastslam run` (no source or world options): a stress run over a grid
-// world of 10^5 landmarks, one per 2 m x 2 m (632 m a side), scanned once a second (~290
-// detections a scan, 1.04 M in all, over 145 k control steps), with FastSLAM 1.0, M = 100.
-// Chosen by measurement (README, "The built-in stress run"): at Bailey's 0.2 s scans and 10 m
-// spacing the same 10^5 landmarks take 3.09 M control steps and 343 k scans (~55 s), and
-// FastSLAM 1.0 loses its way (particle depletion: pose RMSE ~2 km); the denser, shorter run
-// keeps it within metres (what is left is mostly a small rotation of the whole estimate).
-inline constexpr std::uint64_t kDefaultGridLandmarks = 100'000;
-inline constexpr double kDefaultGridSpacing = 2.0;     // m
-inline constexpr double kDefaultGridScanPeriod = 1.0;  // s
-inline constexpr double kDefaultLoopSpacing = 10.0;    // m
-
-// Defaults of the no-odometry model (--motion none): the random-walk steps of v and omega per
-// control (eq. 80), about a car's acceleration (1 m/s^2 gives 0.16 m/s over the 40 steps of a
-// second at 40 Hz) and its steering rate. On Victoria Park (FS1, M = 100, seed 1; with the
-// rear axle tracked, see run_command.cc) sigma_v 0.05 lost the heading in the unexplored west
-// of the park (GPS RMSE 51 m), 0.15 kept it (5.9 m); docs/victoria-park.md.
+// Defaults of the no-odometry models (--motion none, none-curvature): the per-control steps
+// of the random walks of v, omega and the curvature, about a car's acceleration and steering
+// rate (docs/victoria-park.md has how they were chosen).
 inline constexpr double kNoOdometrySigmaV = 0.15;      // m/s per step
 inline constexpr double kNoOdometrySigmaOmega = 0.05;  // rad/s per step
-// The curvature walk's step (--motion none-curvature), per control. Chosen on Victoria Park by
-// the filter's evidence (GPS-free; FS1, M = 100, --vp-laser-x 3.6, seeds 1-10: mean
-// log_evidence 35.7 k at 0.01, 34.7 k at 0.015, seeds lost at 0.0075, every seed at 0.005:
-// the driver turns the wheel from +0.23 to -0.58 rad while standing at 960 s);
-// docs/victoria-park.md.
 inline constexpr double kNoOdometrySigmaKappa = 0.01;  // 1/m per step
 
 // Filter noises that replace the source's (a log header's, or the simulator's).
@@ -62,18 +34,14 @@ struct NoiseOverrides {
 };
 
 struct RunOptions {
-  std::string source = "sim";  // sim | log (convert: sim | victoria-park)
-  std::string data;            // log: the log file; victoria-park: the data set's directory
-  // World: CSV files, or a procedural world ("grid" or "loop").
+  std::string source = "sim";  // a name in the registry (tools/datasets/source.h)
+  std::string data;            // a recorded source's file or directory
+  // --source sim: the world and the simulator (tools/datasets/sim_source.h SimWorldOptions).
   std::string landmarks_csv;
   std::string waypoints_csv;
   std::string world = "grid";
   std::uint64_t landmarks = kDefaultGridLandmarks;  // grid
-  // Metres per landmark (density 1/spacing^2); unset: kDefaultGridSpacing on a grid,
-  // kDefaultLoopSpacing on a loop.
   std::optional<double> spacing;
-  // Seconds between simulated scans; unset: kDefaultGridScanPeriod on a grid world, else
-  // sim.dt_observe (Bailey's 0.2 s).
   std::optional<double> scan_period;
   double loop_length = 2000.0;  // loop
   SimConfig sim;
@@ -117,6 +85,10 @@ struct RunOptions {
 // source tree's tools/scripts/plot_run.py.
 std::string default_plot_script();
 
+// The source's options: the world, the data, the seed; false alarms only under unknown
+// association.
+SourceOptions source_options(const RunOptions& options);
+
 // The filter's configuration for a source with header `h` under `options`: the header's
 // models and noises, the options' algorithm, particles, association, ... and noise overrides;
 // without odometry the Brownian model, and on Victoria Park the rear axle tracked with the
@@ -126,13 +98,13 @@ engine::FilterConfig filter_config(const RunOptions& options, const LogHeader& h
 // odometry on Victoria Park ((a, b), the laser from the rear axle).
 engine::SensorOffset tracked_point_offset(const RunOptions& options, const LogHeader& h);
 
-// Runs any source (the name is historical) and returns the process exit code; throws
-// std::exception with a clear message on bad options or unreadable files.
+// `fastslam run` on any source; returns the process exit code. Throws std::exception with a
+// clear message on bad options or unreadable files.
 int run_simulation(const RunOptions& options);
 
-// `fastslam convert`: writes the source (sim: the world and route of `options`, simulated with
-// its seed, truth poses and landmarks included; victoria-park: the data set in `data`) as a
-// native log to the file `options.out`. The file appears only when complete.
+// `fastslam convert`: writes any source's events, header and true landmarks (a simulated
+// source passes its false alarms on) as a native log to the file `options.out`, which appears
+// only when complete.
 int convert_to_log(const RunOptions& options);
 
 }  // namespace fastslam::tools

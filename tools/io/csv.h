@@ -24,8 +24,6 @@ class CsvReader {
   // file. Blank lines are skipped. Throws std::runtime_error on a malformed row.
   bool next(std::span<double> out);
 
-  std::size_t line() const noexcept { return line_; }
-  const std::string& path() const noexcept { return path_; }
   // Throws std::runtime_error "<path>:<line>: <what>" for the current line.
   [[noreturn]] void fail(const std::string& what) const;
 

@@ -80,10 +80,6 @@ class Simulator {
   // `step` untouched, once the route has been driven `loops` times.
   bool next(SimStep& step);
 
-  const TruePose& truth() const noexcept { return pose_; }
-  const SimConfig& config() const noexcept { return config_; }
-  const World& world() const noexcept { return *world_; }
-
  private:
   void observe(SimStep& step);
 

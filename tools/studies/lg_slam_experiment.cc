@@ -51,8 +51,6 @@ void validate(const LgSlamWorldConfig& world) {
   }
 }
 
-Eigen::Vector2d lg_slam_start(const LgSlamWorldConfig& world) { return waypoint(world, 0); }
-
 LgSlamSimulator::LgSlamSimulator(const LgSlamWorldConfig& world, std::uint64_t seed)
     : world_(world), seed_(seed) {
   validate(world);
@@ -62,7 +60,7 @@ LgSlamSimulator::LgSlamSimulator(const LgSlamWorldConfig& world, std::uint64_t s
         2.0 * std::numbers::pi * static_cast<double>(k) / static_cast<double>(world.landmarks);
     landmarks_.push_back(world.landmark_radius * Eigen::Vector2d(std::cos(angle), std::sin(angle)));
   }
-  pose_ = lg_slam_start(world);
+  pose_ = waypoint(world, 0);  // the robot starts exactly known, on its first waypoint
 }
 
 void LgSlamSimulator::step(Eigen::Vector2d& control,

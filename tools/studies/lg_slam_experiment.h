@@ -82,9 +82,6 @@ class LgSlamSimulator {
   Eigen::Vector2d pose_;
 };
 
-// The robot's first waypoint (its exactly known start).
-Eigen::Vector2d lg_slam_start(const LgSlamWorldConfig& world);
-
 struct LgSlamErrors {
   double landmark = 0.0;    // m, RMS over the counted landmarks (NaN when none is counted)
   double pose = 0.0;        // m
