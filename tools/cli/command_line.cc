@@ -125,36 +125,9 @@ void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::PositiveNumber);
 }
 
-}  // namespace
-
-void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+// Association, existence and the map's scoring (ml, das, ekf).
+void add_association_options(CLI::App& cmd, RunOptions& o) {
   engine::FilterConfig& f = o.filter;
-  cmd.add_option("--source", o.source,
-                 "where events come from: a simulated world, a native log or a data set")
-      ->check(CLI::IsMember(source_names()))
-      ->capture_default_str();
-  cmd.add_option("--data", o.data,
-                 "a recorded source's file or directory: the log file (docs/log-format.md) or "
-                 "the data set's directory");
-  add_world_options(cmd, o, w);
-  cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
-      ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
-      ->capture_default_str();
-  cmd.add_option("--motion", o.motion,
-                 "odometry: the source's motion model; none: ignore the controls, Brownian "
-                 "velocities (eq. 79-81; --sigma-u0/--sigma-u1 are the v and omega increments); "
-                 "none-curvature: the same walking v and the path's curvature (1/m), so the "
-                 "heading cannot turn while the vehicle stands")
-      ->check(CLI::IsMember({"odometry", "none", "none-curvature"}))
-      ->capture_default_str();
-  cmd.add_option("--particles", f.particles, "particles (M)")
-      ->check(CLI::Range(1U, 100'000'000U))
-      ->capture_default_str();
-  cmd.add_option("--association", w.association,
-                 "data association: known (ids from the source), ml (maximum likelihood, "
-                 "eq. 64) or das (sampling, eq. 65)")
-      ->check(CLI::IsMember({"known", "ml", "das"}))
-      ->capture_default_str();
   cmd.add_option("--log-p0", f.log_new_landmark,
                  "ln p0, the log-likelihood of a new landmark (ml, das)")
       ->capture_default_str();
@@ -190,6 +163,11 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "metres within which estimated and true landmarks are paired (ml, das)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+}
+
+// Seed, threads and resampling.
+void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  engine::FilterConfig& f = o.filter;
   cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
       ->capture_default_str();
   cmd.add_option("--threads", f.threads, "worker threads (0: all cores)")
@@ -213,6 +191,59 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--resample-scheme", w.scheme, "how to draw the ancestors")
       ->check(CLI::IsMember({"systematic", "stratified", "multinomial"}))
       ->capture_default_str();
+}
+
+// What a run writes: the output directory, the trace, the progress bar, the picture.
+void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  cmd.add_option("--out", o.out,
+                 "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
+  cmd.add_option("--trace", o.trace,
+                 "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
+                 "landmark RMSE of the seen landmarks, landmarks in the map)");
+  cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
+      ->capture_default_str();
+  cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
+  o.plot_script = default_plot_script();
+  cmd.add_flag_callback(
+      "--no-plot", [&o] { o.plot_script.clear(); },
+      "with --out: no map.png (drawn by tools/scripts/plot_run.py with matplotlib, or "
+      "$FASTSLAM_PLOT_SCRIPT)");
+  add_config_option(cmd, w);
+}
+
+}  // namespace
+
+void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  engine::FilterConfig& f = o.filter;
+  cmd.add_option("--source", o.source,
+                 "where events come from: a simulated world, a native log or a data set")
+      ->check(CLI::IsMember(source_names()))
+      ->capture_default_str();
+  cmd.add_option("--data", o.data,
+                 "a recorded source's file or directory: the log file (docs/log-format.md) or "
+                 "the data set's directory");
+  add_world_options(cmd, o, w);
+  cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
+      ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
+      ->capture_default_str();
+  cmd.add_option("--motion", o.motion,
+                 "odometry: the source's motion model; none: ignore the controls, Brownian "
+                 "velocities (eq. 79-81; --sigma-u0/--sigma-u1 are the v and omega increments); "
+                 "none-curvature: the same walking v and the path's curvature (1/m), so the "
+                 "heading cannot turn while the vehicle stands")
+      ->check(CLI::IsMember({"odometry", "none", "none-curvature"}))
+      ->capture_default_str();
+  cmd.add_option("--particles", f.particles, "particles (M)")
+      ->check(CLI::Range(1U, 100'000'000U))
+      ->capture_default_str();
+  cmd.add_option("--association", w.association,
+                 "data association: known (ids from the source), ml (maximum likelihood, "
+                 "eq. 64) or das (sampling, eq. 65)")
+      ->check(CLI::IsMember({"known", "ml", "das"}))
+      ->capture_default_str();
+  add_association_options(cmd, o);
+  add_execution_options(cmd, o, w);
   cmd.add_option("--sigma-range", w.sigma_range,
                  "filter range noise, m (default: the source's; the simulator keeps its own)")
       ->check(CLI::PositiveNumber);
@@ -230,21 +261,7 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--initial-heading-deg", w.initial_heading_deg,
                  "start heading, degrees (default: the source's; victoria-park fits it to GPS)");
   add_victoria_park_options(cmd, o, w);
-  cmd.add_option("--out", o.out,
-                 "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
-  cmd.add_option("--trace", o.trace,
-                 "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
-                 "landmark RMSE of the seen landmarks, landmarks in the map)");
-  cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
-      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
-      ->capture_default_str();
-  cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
-  o.plot_script = default_plot_script();
-  cmd.add_flag_callback(
-      "--no-plot", [&o] { o.plot_script.clear(); },
-      "with --out: no map.png (drawn by tools/scripts/plot_run.py with matplotlib, or "
-      "$FASTSLAM_PLOT_SCRIPT)");
-  add_config_option(cmd, w);
+  add_output_options(cmd, o, w);
 }
 
 void add_convert_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
