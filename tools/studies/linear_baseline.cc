@@ -101,6 +101,108 @@ void LinearFastSlam::predict(const engine::Control& control, double dt) {
   stats_.predict_seconds += seconds_between(t0, Clock::now());
 }
 
+LinearFastSlam::ScanGate LinearFastSlam::scan_gate() const {
+  const engine::ExistenceConfig& ex = config_.existence;
+  ScanGate g;
+  g.negative = ex.negative_information && config_.sensor.max_range > ex.range_margin;
+  g.view_range = config_.sensor.max_range - ex.range_margin;
+  g.half_fov = 0.5 * config_.sensor.field_of_view;
+  g.gate = config_.gating.gate;
+  g.scale2 = config_.gating.search_scale * config_.gating.search_scale;
+  return g;
+}
+
+double LinearFastSlam::associate(const Particle& p, std::span<const Eigen::Vector2d> z,
+                                 const ScanGate& g, std::span<Eigen::Vector2d> at,
+                                 std::span<double> radius2) {
+  const std::vector<memory::Landmark>& map = p.map;
+  const engine::Pose& pose = p.pose;
+  const Eigen::Vector2d from = sensor_.sensor_position(pose);
+  const double heading = pose[2] + sensor_.offset().yaw;
+  // Candidate discs (the engine's radius: the gate under linearisation, with a margin), and
+  // a box around the sensor holding every disc and the footprint, for a cheap first test.
+  double reach = g.negative ? g.view_range : 0.0;
+  for (std::size_t j = 0; j < z.size(); ++j) {
+    at[j] = sensor_.landmark_from(z[j], pose);
+    radius2[j] = g.scale2 * g.gate * (landmark_variance_bound_ + measurement_variance(z[j][0]));
+    reach = std::max(reach, (at[j] - from).norm() + std::sqrt(radius2[j]));
+  }
+  candidates_.clear();
+  in_view_.clear();
+  for (std::size_t k = 0; k < map.size(); ++k) {
+    const memory::Landmark& lm = map[k];
+    const double dx = lm.x - from[0];
+    const double dy = lm.y - from[1];
+    if (std::abs(dx) > reach || std::abs(dy) > reach) continue;
+    const double d2 = dx * dx + dy * dy;
+    if (g.negative && d2 <= g.view_range * g.view_range &&
+        std::abs(std::remainder(std::atan2(dy, dx) - heading, 2 * std::numbers::pi)) <=
+            g.half_fov) {
+      in_view_.push_back(static_cast<std::uint32_t>(k));
+    }
+    if (d2 < 1e-18) continue;  // g is undefined at the sensor
+    for (std::size_t j = 0; j < z.size(); ++j) {
+      const double ex2 = lm.x - at[j][0];
+      const double ey2 = lm.y - at[j][1];
+      if (ex2 * ex2 + ey2 * ey2 > radius2[j]) continue;
+      const engine::LandmarkObservation t =
+          engine::evaluate_observation(sensor_, engine::to_gaussian(lm), pose, z[j], r_);
+      if (t.mahalanobis2 <= g.gate) {
+        candidates_.push_back(
+            {static_cast<std::uint32_t>(j), static_cast<memory::Slot>(k), t.log_likelihood});
+      }
+    }
+  }
+  return engine::associate_maximum_likelihood(candidates_, config_.log_new_landmark, assignment_);
+}
+
+void LinearFastSlam::update_map(Particle& p, std::span<const Eigen::Vector2d> z,
+                                std::uint64_t scan_step) {
+  const engine::ExistenceConfig& ex = config_.existence;
+  std::vector<memory::Landmark>& map = p.map;
+  const engine::Pose& pose = p.pose;
+  touched_.clear();
+  for (std::size_t j = 0; j < z.size(); ++j) {
+    if (assignment_[j] == engine::kNewLandmark) continue;
+    const auto slot = static_cast<std::uint32_t>(assignment_[j]);
+    memory::Landmark& stored = map[slot];
+    engine::LandmarkGaussian lm = engine::to_gaussian(stored);
+    engine::apply_update(lm, engine::evaluate_observation(sensor_, lm, pose, z[j], r_), r_);
+    engine::store_gaussian(lm, stored);
+    stored.log_odds += ex.seen;
+    stored.last_seen = static_cast<std::int64_t>(scan_step);
+    touched_.push_back(slot);
+  }
+  doomed_.clear();
+  for (const std::uint32_t k : in_view_) {
+    if (std::find(touched_.begin(), touched_.end(), k) != touched_.end()) continue;
+    map[k].log_odds -= ex.missed;
+    if (map[k].log_odds < ex.remove_below) doomed_.push_back(k);
+  }
+  if (!doomed_.empty()) {  // doomed_ is ascending: one compaction pass keeps the order
+    std::size_t out = doomed_[0], d = 0;
+    for (std::size_t k = doomed_[0]; k < map.size(); ++k) {
+      if (d < doomed_.size() && doomed_[d] == k) {
+        ++d;
+        continue;
+      }
+      map[out++] = map[k];
+    }
+    map.resize(out);
+    stats_.landmarks_removed += doomed_.size();
+  }
+  for (std::size_t j = 0; j < z.size(); ++j) {
+    if (assignment_[j] != engine::kNewLandmark) continue;
+    memory::Landmark stored;
+    engine::store_gaussian(engine::initialize_landmark(sensor_, pose, z[j], r_), stored);
+    stored.log_odds = ex.initial;
+    stored.id = scan_step * kObservationsPerScanLimit + j;
+    stored.last_seen = static_cast<std::int64_t>(scan_step);
+    map.push_back(stored);
+    ++stats_.landmarks_created;
+  }
+}
+
 void LinearFastSlam::observe(std::span<const engine::Observation> scan) {
   if (scan.size() >= kObservationsPerScanLimit) {
     throw std::invalid_argument("linear baseline: observe: too many observations in a scan");
@@ -118,100 +220,15 @@ void LinearFastSlam::observe(std::span<const engine::Observation> scan) {
     landmark_variance_bound_ = std::max(landmark_variance_bound_, measurement_variance(zj[0]));
   }
   const std::uint64_t scan_step = step_;
-  const engine::ExistenceConfig& ex = config_.existence;
-  const bool negative = ex.negative_information && config_.sensor.max_range > ex.range_margin;
-  const double view_range = config_.sensor.max_range - ex.range_margin;
-  const double half_fov = 0.5 * config_.sensor.field_of_view;
-  const double gate = config_.gating.gate;
-  const double scale2 = config_.gating.search_scale * config_.gating.search_scale;
+  const ScanGate gate = scan_gate();
   std::vector<Eigen::Vector2d> at(z.size());
   std::vector<double> radius2(z.size());
   assignment_.resize(z.size());
-
   for (Particle& p : particles_) {
     const Clock::time_point t0 = Clock::now();
-    std::vector<memory::Landmark>& map = p.map;
-    const engine::Pose& pose = p.pose;
-    const Eigen::Vector2d from = sensor_.sensor_position(pose);
-    const double heading = pose[2] + sensor_.offset().yaw;
-    // Candidate discs (the engine's radius: the gate under linearisation, with a margin), and
-    // a box around the sensor holding every disc and the footprint, for a cheap first test.
-    double reach = negative ? view_range : 0.0;
-    for (std::size_t j = 0; j < z.size(); ++j) {
-      at[j] = sensor_.landmark_from(z[j], pose);
-      radius2[j] = scale2 * gate * (landmark_variance_bound_ + measurement_variance(z[j][0]));
-      reach = std::max(reach, (at[j] - from).norm() + std::sqrt(radius2[j]));
-    }
-    candidates_.clear();
-    in_view_.clear();
-    for (std::size_t k = 0; k < map.size(); ++k) {
-      const memory::Landmark& lm = map[k];
-      const double dx = lm.x - from[0];
-      const double dy = lm.y - from[1];
-      if (std::abs(dx) > reach || std::abs(dy) > reach) continue;
-      const double d2 = dx * dx + dy * dy;
-      if (negative && d2 <= view_range * view_range &&
-          std::abs(std::remainder(std::atan2(dy, dx) - heading, 2 * std::numbers::pi)) <=
-              half_fov) {
-        in_view_.push_back(static_cast<std::uint32_t>(k));
-      }
-      if (d2 < 1e-18) continue;  // g is undefined at the sensor
-      for (std::size_t j = 0; j < z.size(); ++j) {
-        const double ex2 = lm.x - at[j][0];
-        const double ey2 = lm.y - at[j][1];
-        if (ex2 * ex2 + ey2 * ey2 > radius2[j]) continue;
-        const engine::LandmarkObservation t =
-            engine::evaluate_observation(sensor_, engine::to_gaussian(lm), pose, z[j], r_);
-        if (t.mahalanobis2 <= gate) {
-          candidates_.push_back(
-              {static_cast<std::uint32_t>(j), static_cast<memory::Slot>(k), t.log_likelihood});
-        }
-      }
-    }
-    p.log_weight +=
-        engine::associate_maximum_likelihood(candidates_, config_.log_new_landmark, assignment_);
+    p.log_weight += associate(p, z, gate, at, radius2);
     const Clock::time_point t1 = Clock::now();
-
-    touched_.clear();
-    for (std::size_t j = 0; j < z.size(); ++j) {
-      if (assignment_[j] == engine::kNewLandmark) continue;
-      const auto slot = static_cast<std::uint32_t>(assignment_[j]);
-      memory::Landmark& stored = map[slot];
-      engine::LandmarkGaussian lm = engine::to_gaussian(stored);
-      engine::apply_update(lm, engine::evaluate_observation(sensor_, lm, pose, z[j], r_), r_);
-      engine::store_gaussian(lm, stored);
-      stored.log_odds += ex.seen;
-      stored.last_seen = static_cast<std::int64_t>(scan_step);
-      touched_.push_back(slot);
-    }
-    doomed_.clear();
-    for (const std::uint32_t k : in_view_) {
-      if (std::find(touched_.begin(), touched_.end(), k) != touched_.end()) continue;
-      map[k].log_odds -= ex.missed;
-      if (map[k].log_odds < ex.remove_below) doomed_.push_back(k);
-    }
-    if (!doomed_.empty()) {  // doomed_ is ascending: one compaction pass keeps the order
-      std::size_t out = doomed_[0], d = 0;
-      for (std::size_t k = doomed_[0]; k < map.size(); ++k) {
-        if (d < doomed_.size() && doomed_[d] == k) {
-          ++d;
-          continue;
-        }
-        map[out++] = map[k];
-      }
-      map.resize(out);
-      stats_.landmarks_removed += doomed_.size();
-    }
-    for (std::size_t j = 0; j < z.size(); ++j) {
-      if (assignment_[j] != engine::kNewLandmark) continue;
-      memory::Landmark stored;
-      engine::store_gaussian(engine::initialize_landmark(sensor_, pose, z[j], r_), stored);
-      stored.log_odds = ex.initial;
-      stored.id = scan_step * kObservationsPerScanLimit + j;
-      stored.last_seen = static_cast<std::int64_t>(scan_step);
-      map.push_back(stored);
-      ++stats_.landmarks_created;
-    }
+    update_map(p, z, scan_step);
     const Clock::time_point t2 = Clock::now();
     stats_.associate_seconds += seconds_between(t0, t1);
     stats_.update_seconds += seconds_between(t1, t2);

@@ -87,6 +87,19 @@ class LinearFastSlam {
     double log_weight = 0.0;
     std::vector<memory::Landmark> map;
   };
+  // The scan's gating constants, from the config.
+  struct ScanGate {
+    bool negative = false;  // negative information applies
+    double view_range = 0.0, half_fov = 0.0, gate = 0.0, scale2 = 0.0;
+  };
+  ScanGate scan_gate() const;
+  // Fills candidates_ and in_view_ for `p` (the positions `at` and disc radii `radius2` per
+  // observation are scratch), then assignment_ by ML; returns the log-weight increment.
+  double associate(const Particle& p, std::span<const Eigen::Vector2d> z, const ScanGate& g,
+                   std::span<Eigen::Vector2d> at, std::span<double> radius2);
+  // Updates the associated landmarks, applies negative information to the rest in view and
+  // adds the new ones.
+  void update_map(Particle& p, std::span<const Eigen::Vector2d> z, std::uint64_t scan_step);
   // Systematic resampling with the streams of (seed, scan_step); duplicates copy their map.
   void resample_after(std::uint64_t scan_step);
   double measurement_variance(double range) const;
