@@ -17,7 +17,7 @@
 namespace fastslam::tools {
 
 // The built-in default world: a grid of 10^5 landmarks, one per 2 m x 2 m, scanned once a
-// second, so a default run stays dense and short (docs/scaling.md has the measurements).
+// second, so a default run stays dense and short (docs/scaling.md, "The built-in stress run").
 inline constexpr std::uint64_t kDefaultGridLandmarks = 100'000;
 inline constexpr double kDefaultGridSpacing = 2.0;     // m
 inline constexpr double kDefaultGridScanPeriod = 1.0;  // s

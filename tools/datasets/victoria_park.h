@@ -1,27 +1,14 @@
 // The Victoria Park data set (../shared/data/victoria_park/README.md) read into a native `Log`
-// (tools/io/log_format.h): every odometry sample as a control, every laser scan (with its tree
-// detections, gated) as a scan, every GPS fix as a fix, in one time order; the Guivant-Nebot
-// car model with the laser offset in the header, and the initial pose from the first GPS fix
-// with a heading fitted to the GPS track (see `VictoriaParkOptions::heading_fit_seconds`).
-//
-// Time conventions. Odometry sample k is held from its own time t_k to the next sample's
-// t_{k+1} (the data set's reference code integrates "over dt = time to next sample"); as every
-// log control it is stamped at the END of that interval, t_{k+1}, with dt = t_{k+1} - t_k. The
-// last sample is held for one nominal period, 25 ms (the odometry is exactly 40 Hz). A scan is
-// stamped at its own time and comes after every control stamped at or before it, so the pose
-// it is processed at lags the scan by less than one odometry period (25 ms, < 0.25 m at the
-// car's speeds), unless `split_controls_at_scans` cuts that interval at the scan. On equal
-// times the order is control, scan, GPS.
-//
-// Reading is strict: a wrong or missing header, a wrong column count, a field that is not a
-// number, NaN or infinity (tools/io/csv.h), a non-positive range, a negative diameter, time going
-// backwards, a scan index that is not the next one, a detection whose scan time or count
-// disagrees with laser_scan_times.csv: std::runtime_error "<file>:<line>: <reason>", and
-// nothing is returned. Detections outside the gate are dropped (and counted), not refused.
+// (tools/io/log_format.h): odometry samples as controls (each stamped at the end of the interval
+// it is held over), laser scans with their gated tree detections as scans, GPS fixes as fixes,
+// in one time order (control, scan, GPS on equal times); the Guivant-Nebot car model with the
+// laser offset in the header, and the start pose from the first GPS fix with a heading fitted
+// to the GPS track. Reading is strict: every malformed row throws std::runtime_error
+// "<file>:<line>: <reason>" and nothing is returned; detections outside the gate are dropped
+// and counted. docs/victoria-park.md ("The reader") has the conventions in full.
 //
 // Ownership: returns values. Thread safety: thread-safe (no shared state).
-// Costs: O(rows) time and memory (about 6 MB for the whole data set); reading takes tens of
-// milliseconds.
+// Costs: O(rows) time and memory (about 6 MB for the whole data set).
 #pragma once
 
 #include <cstddef>

@@ -1,38 +1,11 @@
 // The LG-SLAM convergence experiment (paper section 7, appendix B): FastSLAM 2.0 with M = 1 on
-// linear-Gaussian SLAM (engine/lg_slam_filter.h), the errors of its map and pose against the truth
-// over time, over several seeds, in two variants:
-//   anchored  landmark 0 is known (its true position, covariance 0): the theorem's case; errors
-//             are absolute;
-//   relative  no landmark is known: the map is only defined up to a common offset (the paper:
-//             "correct in relative terms, up to a fixed offset that uniformly applies to all
-//             features"), so the errors are measured after removing the least-squares offset,
-//             the mean of (estimate - truth) over the landmarks counted, from landmarks and pose.
-// landmark_error = RMS over the mapped landmarks, the known one excluded (it is given), of the
-// distance from estimate to truth; pose_error = the distance from the estimated pose to the true
-// one. Before the first loop is complete only the landmarks seen so far are counted.
-//
-// The world: K landmarks evenly on a circle (radius 10 m by default), the robot's waypoints on a
-// concentric circle (8 m), `steps_per_loop` per loop. Each step the control is the displacement
-// from the true pose to the next waypoint, the true motion adds N(0, sigma_motion^2 I) (eq. 78),
-// and every landmark within `sensor_range` of the true pose is observed, z = m - s +
-// N(0, sigma_measurement^2 I) (eq. 77). The robot starts (exactly known) between landmarks 0
-// and 1. Noise comes from the keyed streams (seed, step, *, Purpose::kSimulator); the filter's from
-// (seed, step, particle, Purpose::kProposal); both variants of a seed see the same data.
-//
-// `fastslam experiment lg-slam` writes DIR/lg_slam.csv: header step,seed,variant,landmark_error,
-// pose_error, one row per recorded step, seed and variant (`lg_slam_recorded_step`: every step up
-// to 100, then about 50 per decade, and the last: for log-scale plots), and prints the mean errors
-// over the seeds at steps 1, 10, 100, ... and the last.
-//
-// What to expect (measured, see the README): the map errors shrink as a power of the step, the
-// relative ones about as 1/sqrt(t), the anchored ones much more slowly (the anchor's information
-// reaches the other landmarks only through the pose, M = 1 keeps no correlations: roughly
-// t^(-1/k) with k about the number of landmarks in view, as a linear analysis of the mean error
-// predicts). The pose error does not go to zero: the theorem is about its expectation, while a
-// single particle's pose is a draw from the proposal, whose spread is set by the noises.
+// linear-Gaussian SLAM (engine/lg_slam_filter.h), the map and pose errors against the truth
+// over time and seeds, anchored (landmark 0 known: the theorem's case) and relative (errors
+// after removing the mean offset of the estimate). The world, the error definitions and the
+// results are in docs/experiments.md (lg-slam).
 //
 // Ownership: plain values. Thread safety: thread-compatible; runs on the calling thread.
-// Costs: O(seeds * steps * (M * observations + K)), about a microsecond per step at M = 1.
+// Costs: O(seeds * steps * (M * observations + K)) time; memory O(recorded rows).
 #pragma once
 
 #include <cstddef>

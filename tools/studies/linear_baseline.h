@@ -1,29 +1,15 @@
-// The linear-copy baseline of the paper's section 8 (fig. 14-15): a deliberately plain FastSLAM
-// 1.0 whose particles each own a flat std::vector of landmarks, copied whole whenever
-// resampling duplicates a particle, with maximum-likelihood association by a linear scan of the
-// particle's map. It exists to be measured against the tree engine (engine/filter.h) in
-// `fastslam bench scaling --engine linear`, so it is kept simple and shares the engine's math:
-//   - motion: BaileyCarModel::sample with the keyed normals (seed, control step, particle,
-//     Purpose::kMotion), one control at a time;
-//   - association: every landmark of the map is tested against the disc around the position
-//     each observation implies (the same Euclidean radius the engine derives from its gate),
-//     candidates are scored by evaluate_observation and gated on the Mahalanobis distance, and
-//     associate_maximum_likelihood chooses for the whole scan (mutual exclusion, ln p0 for new);
-//   - update: apply_update (Joseph form), existence log-odds with negative information for the
-//     landmarks in the sensor footprint (eq. 73-75, removed below the bound), and
-//     initialize_landmark for new ones;
-//   - resampling: systematic after EVERY scan (the paper's setting; the config's policy is
-//     ignored), ancestors from parallel::draw_ancestors_sequential; a particle drawn k times
-//     gives its map to one child and k - 1 whole copies to the others.
-// Supported: Algorithm::kFastSlam1, Association::kMaximumLikelihood, MotionKind::kBaileyCar;
-// the constructor refuses anything else.
+// The linear-copy baseline of the paper's section 8 (fig. 14-15): a plain FastSLAM 1.0 whose
+// particles each own a flat std::vector of landmarks, copied whole when resampling duplicates a
+// particle, with ML association by a linear scan of each map. It shares the engine's math
+// (motion sampling with the keyed streams, the gate, evaluate_observation, Joseph update,
+// negative information, ML with mutual exclusion) and resamples (systematic) after every scan.
+// Supported: FastSLAM 1.0, ML, Bailey's car; the constructor refuses anything else.
+// docs/scaling.md compares it with the tree engine.
 //
-// Ownership: the baseline owns its particles and their maps; `observe` and `set_map` borrow their
-// spans for the call. Thread safety: thread-compatible; it runs on the calling thread only
-// (config.threads is ignored).
-// Costs (M particles, N landmarks per map, Z observations): `predict` O(M); `observe`
-// O(M (N + Z k)) for the scan of every map plus O(M N) for the copies at resampling;
-// `set_map` O(M N); memory M maps of N * 64 bytes (live_bytes() sums the capacities).
+// Ownership: owns its particles and their maps; `observe` and `set_map` borrow their spans for
+// the call. Thread safety: thread-compatible; runs on the calling thread (config.threads is
+// ignored). Costs (M particles, N landmarks per map, Z observations): `predict` O(M); `observe`
+// O(M (N + Z k)) plus O(M N) for the copies at resampling; memory M maps of N * 64 bytes.
 #pragma once
 
 #include <cstdint>

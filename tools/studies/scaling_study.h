@@ -1,27 +1,13 @@
-// The scaling studies (paper section 8, fig. 14-15; docs/scaling.md): the time of a sensor update
-// and the live memory of M particles whose maps hold N landmarks at constant density, over
-// several decades of N (the study in N), of M (the study in particles) and for 1 and 2 threads
-// (parallel efficiency). `fastslam bench scaling` runs one study from the command line: every
-// combination of the N, M and thread lists; the association benchmark
-// (bench/engine/association_benchmark.cc) runs points of it under Google Benchmark.
-//
-// One point: a grid world of N landmarks (one per spacing x spacing cell) and its lawnmower
-// route; `updates` scans simulated along the start of the route (the vehicle sees the same
-// density whatever N is); a filter whose particles all share the true map as a prior
-// (Filter::set_map: covariance 0.1 m^2 per axis, existence log-odds 50, ids = world indices so
-// known association works too). Timed: feeding the controls and scans (every particle phase
-// and the resampling), not the estimate read afterwards (it copies a whole map, O(N)); wall
-// and process CPU seconds. Memory: the heap's live bytes at the end, and a lower bound, the
-// live bytes of the one shared map right after set_map (every particle needs at least that).
-//
-// Engines: `kTree` is the filter (engine/filter.h); `kLinear` the linear-copy baseline
-// (tools/studies/linear_baseline.h: flat per-particle maps copied whole at resampling, FastSLAM 1.0
-// with ML only, resampling every scan), given the same prior map as flat copies; its live bytes are
-// the sum of the maps' capacities and its lower bound one flat map (N * 64 bytes). It is O(M N)
-// per update, so it refuses N above `linear_max_landmarks`.
+// The scaling studies (paper section 8, fig. 14-15): the time of a sensor update and the live
+// memory of M particles whose maps hold N landmarks at constant density, for every N x M x
+// threads of the lists, on the tree engine or the linear-copy baseline (linear_baseline.h).
+// One point: a grid world of N landmarks, `updates` scans simulated along the start of its
+// route, every particle sharing the true map as a prior (Filter::set_map); timed: feeding the
+// controls and scans. docs/scaling.md has the set-up in full and the results.
 //
 // Ownership: plain values. Thread safety: one study per call; the filter runs its own threads.
-// Costs: O(N log N) setup per point (world, kd-tree, map), then the updates.
+// Costs: O(N log N) setup per point (world, kd-tree, map), then the updates; the linear engine
+// is O(M N) per update and refuses N above `linear_max_landmarks`.
 #pragma once
 
 #include <cstdint>
