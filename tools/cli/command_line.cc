@@ -125,92 +125,10 @@ void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::PositiveNumber);
 }
 
-// Association, existence and the map's scoring (ml, das, ekf).
-void add_association_options(CLI::App& cmd, RunOptions& o) {
-  engine::FilterConfig& f = o.filter;
-  cmd.add_option("--log-p0", f.log_new_landmark,
-                 "ln p0, the log-likelihood of a new landmark (ml, das)")
-      ->capture_default_str();
-  cmd.add_option("--gate", f.gating.gate,
-                 "squared Mahalanobis gate for association candidates (ml, das)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd.add_flag("!--no-negative-information", f.existence.negative_information,
-               "never remove landmarks that were in view and not seen (ml, das)");
-  cmd.add_option("--existence-missed", f.existence.missed,
-                 "log-odds a landmark loses when in view and not seen (ml, das)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd.add_option("--existence-range-margin", f.existence.range_margin,
-                 "metres inside the sensor range where a missed landmark counts (ml, das)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd.add_option("--clutter", o.sim.clutter_rate,
-                 "simulated false alarms per scan (Poisson mean; ml, das)")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
-                 "ekf with ml: associate when the squared Mahalanobis distance is below this")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd.add_option("--ekf-gate-new", f.ekf.gate_new,
-                 "ekf with ml: a new landmark when every squared Mahalanobis distance exceeds it")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
-               "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
-  cmd.add_option("--match-radius", o.match_radius,
-                 "metres within which estimated and true landmarks are paired (ml, das)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-}
-
-// Seed, threads and resampling.
-void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
-  engine::FilterConfig& f = o.filter;
-  cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
-      ->capture_default_str();
-  cmd.add_option("--threads", f.threads, "worker threads (0: all cores)")
-      ->check(CLI::Range(0U, 4096U))
-      ->capture_default_str();
-  cmd.add_option("--grain", f.grain, "particles per parallel task")
-      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 30))
-      ->capture_default_str();
-  cmd.add_option("--split-seconds", f.split_seconds,
-                 "a pass whose previous one took longer is split across the threads whatever "
-                 "--grain (0: always)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd.add_option("--resample", w.resample, "when to resample: every (scan) or neff")
-      ->check(CLI::IsMember({"every", "neff"}))
-      ->capture_default_str();
-  cmd.add_option("--neff-fraction", f.resample.ess_fraction,
-                 "with --resample neff: resample when N_eff < fraction x M")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  cmd.add_option("--resample-scheme", w.scheme, "how to draw the ancestors")
-      ->check(CLI::IsMember({"systematic", "stratified", "multinomial"}))
-      ->capture_default_str();
-}
-
-// What a run writes: the output directory, the trace, the progress bar, the picture.
-void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
-  cmd.add_option("--out", o.out,
-                 "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
-  cmd.add_option("--trace", o.trace,
-                 "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
-                 "landmark RMSE of the seen landmarks, landmarks in the map)");
-  cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
-      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
-      ->capture_default_str();
-  cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
-  o.plot_script = default_plot_script();
-  cmd.add_flag_callback(
-      "--no-plot", [&o] { o.plot_script.clear(); },
-      "with --out: no map.png (drawn by tools/scripts/plot_run.py with matplotlib, or "
-      "$FASTSLAM_PLOT_SCRIPT)");
-  add_config_option(cmd, w);
-}
+// Option groups of `run`, defined at the end of the file.
+void add_association_options(CLI::App& cmd, RunOptions& o);
+void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w);
+void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w);
 
 }  // namespace
 
@@ -358,5 +276,96 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
     o.initial_heading = w.initial_heading_deg * std::numbers::pi / 180;
   }
 }
+
+namespace {
+
+// Association, existence and the map's scoring (ml, das, ekf).
+void add_association_options(CLI::App& cmd, RunOptions& o) {
+  engine::FilterConfig& f = o.filter;
+  cmd.add_option("--log-p0", f.log_new_landmark,
+                 "ln p0, the log-likelihood of a new landmark (ml, das)")
+      ->capture_default_str();
+  cmd.add_option("--gate", f.gating.gate,
+                 "squared Mahalanobis gate for association candidates (ml, das)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("!--no-negative-information", f.existence.negative_information,
+               "never remove landmarks that were in view and not seen (ml, das)");
+  cmd.add_option("--existence-missed", f.existence.missed,
+                 "log-odds a landmark loses when in view and not seen (ml, das)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--existence-range-margin", f.existence.range_margin,
+                 "metres inside the sensor range where a missed landmark counts (ml, das)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--clutter", o.sim.clutter_rate,
+                 "simulated false alarms per scan (Poisson mean; ml, das)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
+                 "ekf with ml: associate when the squared Mahalanobis distance is below this")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--ekf-gate-new", f.ekf.gate_new,
+                 "ekf with ml: a new landmark when every squared Mahalanobis distance exceeds it")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
+               "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
+  cmd.add_option("--match-radius", o.match_radius,
+                 "metres within which estimated and true landmarks are paired (ml, das)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+}
+
+// Seed, threads and resampling.
+void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  engine::FilterConfig& f = o.filter;
+  cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
+      ->capture_default_str();
+  cmd.add_option("--threads", f.threads, "worker threads (0: all cores)")
+      ->check(CLI::Range(0U, 4096U))
+      ->capture_default_str();
+  cmd.add_option("--grain", f.grain, "particles per parallel task")
+      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 30))
+      ->capture_default_str();
+  cmd.add_option("--split-seconds", f.split_seconds,
+                 "a pass whose previous one took longer is split across the threads whatever "
+                 "--grain (0: always)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--resample", w.resample, "when to resample: every (scan) or neff")
+      ->check(CLI::IsMember({"every", "neff"}))
+      ->capture_default_str();
+  cmd.add_option("--neff-fraction", f.resample.ess_fraction,
+                 "with --resample neff: resample when N_eff < fraction x M")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd.add_option("--resample-scheme", w.scheme, "how to draw the ancestors")
+      ->check(CLI::IsMember({"systematic", "stratified", "multinomial"}))
+      ->capture_default_str();
+}
+
+// What a run writes: the output directory, the trace, the progress bar, the picture.
+void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  cmd.add_option("--out", o.out,
+                 "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
+  cmd.add_option("--trace", o.trace,
+                 "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
+                 "landmark RMSE of the seen landmarks, landmarks in the map)");
+  cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
+      ->capture_default_str();
+  cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
+  o.plot_script = default_plot_script();
+  cmd.add_flag_callback(
+      "--no-plot", [&o] { o.plot_script.clear(); },
+      "with --out: no map.png (drawn by tools/scripts/plot_run.py with matplotlib, or "
+      "$FASTSLAM_PLOT_SCRIPT)");
+  add_config_option(cmd, w);
+}
+
+}  // namespace
 
 }  // namespace fastslam::tools

@@ -352,7 +352,7 @@ SourceOptions source_options(const RunOptions& o) {
   s.sim.spacing = o.spacing;
   s.sim.scan_period = o.scan_period;
   s.sim.loop_length = o.loop_length;
-  s.sim.sim = o.sim;
+  s.sim.config = o.sim;
   s.victoria_park = o.victoria_park;
   return s;
 }

@@ -62,12 +62,12 @@ class SimSource final : public Source {
             bool clutter)
       : world_(std::move(world)), sim_(*world_, resolved_sim_config(o), seed), clutter_(clutter) {
     const SimConfig config = resolved_sim_config(o);
-    info_.header = sim_header(o.sim, *world_);
+    info_.header = sim_header(o.config, *world_);
     info_.landmarks = truth_landmarks(*world_);
-    info_.expected_controls = tools::expected_controls(*world_, o.sim);
+    info_.expected_controls = tools::expected_controls(*world_, o.config);
     info_.name = o.landmarks_csv.empty() ? o.world : o.landmarks_csv;
     info_.simulated = true;
-    info_.metrics = {{"clutter_rate", o.sim.clutter_rate}, {"scan_period_s", config.dt_observe}};
+    info_.metrics = {{"clutter_rate", o.config.clutter_rate}, {"scan_period_s", config.dt_observe}};
   }
 
   bool next(Event& e, std::vector<engine::Observation>& scan) override {
@@ -118,7 +118,7 @@ class SimSource final : public Source {
 }  // namespace
 
 SimConfig resolved_sim_config(const SimWorldOptions& o) {
-  SimConfig sim = o.sim;
+  SimConfig sim = o.config;
   if (o.scan_period) {
     sim.dt_observe = *o.scan_period;
   } else if (!csv_world(o) && o.world == "grid") {
@@ -136,11 +136,11 @@ World make_world(const SimWorldOptions& o, std::uint64_t seed) {
   }
   if (o.world == "grid") {
     return make_grid_world(o.landmarks, o.spacing.value_or(kDefaultGridSpacing),
-                           1.5 * o.sim.max_range, seed);
+                           1.5 * o.config.max_range, seed);
   }
   if (o.world == "loop") {
-    return make_loop_world(o.loop_length, o.spacing.value_or(kDefaultLoopSpacing), o.sim.max_range,
-                           10.0, seed);
+    return make_loop_world(o.loop_length, o.spacing.value_or(kDefaultLoopSpacing),
+                           o.config.max_range, 10.0, seed);
   }
   throw std::invalid_argument("unknown --world '" + o.world + "' (grid or loop)");
 }

@@ -32,10 +32,10 @@ struct SimWorldOptions {
   std::uint64_t landmarks = kDefaultGridLandmarks;  // grid
   // Metres per landmark; unset: kDefaultGridSpacing on a grid, kDefaultLoopSpacing on a loop.
   std::optional<double> spacing;
-  // Seconds between scans; unset: kDefaultGridScanPeriod on a grid, else sim.dt_observe.
+  // Seconds between scans; unset: kDefaultGridScanPeriod on a grid, else config.dt_observe.
   std::optional<double> scan_period;
   double loop_length = 2000.0;  // m, loop
-  SimConfig sim;
+  SimConfig config;             // the simulator (its noises are the header's too)
 };
 
 // The world the options describe (deterministic per seed). Throws std::invalid_argument for an

@@ -57,8 +57,8 @@ SourceOptions small_loop(bool clutter) {
   o.clutter = clutter;
   o.sim.world = "loop";
   o.sim.loop_length = 300.0;
-  o.sim.sim.loops = 1;
-  o.sim.sim.clutter_rate = 2.0;
+  o.sim.config.loops = 1;
+  o.sim.config.clutter_rate = 2.0;
   return o;
 }
 
@@ -76,7 +76,7 @@ TEST(SimSource, GivesTheSimulatorsStepsAsEvents) {
       EXPECT_EQ(info.landmarks[i].x, world.landmarks[i].x);
     }
     EXPECT_EQ(info.header.motion.kind, engine::MotionKind::kBaileyCar);
-    EXPECT_EQ(info.header.sensor.sigma_range, o.sim.sim.sigma_range);
+    EXPECT_EQ(info.header.sensor.sigma_range, o.sim.config.sigma_range);
     EXPECT_TRUE(info.simulated);
     EXPECT_EQ(info.name, "loop");
 
