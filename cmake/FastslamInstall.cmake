@@ -9,7 +9,7 @@ install(TARGETS ${_fastslam_libs} EXPORT fastslamTargets
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
   LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
   RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
-foreach(_dir memory parallel engine tools)
+foreach(_dir memory parallel engine)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/${_dir}/ DESTINATION include/fastslam/${_dir}
     FILES_MATCHING PATTERN "*.h")
 endforeach()

@@ -4,10 +4,10 @@
 // resampling) with M = 100 particles whose maps hold N landmarks at constant density (a grid
 // world, one landmark per 10 m x 10 m), N = 10^3 ... 10^6, known and ML association.
 //
-// Setup and timing are tools/scaling_study.h's (`fastslam bench scaling` runs the same study):
-// a grid world, scans simulated along its first lane, particles sharing the true map as a prior
-// (Filter::set_map); timed: feeding the controls and scans. Reported: time per scan, live bytes
-// at the end and the bytes of one map.
+// Setup and timing are tools/studies/scaling_study.h's (`fastslam bench scaling` runs the same
+// study): a grid world, scans simulated along its first lane, particles sharing the true map as a
+// prior (Filter::set_map); timed: feeding the controls and scans. Reported: time per scan, live
+// bytes at the end and the bytes of one map.
 //
 // Args: algorithm (1, 2), association (0 known, 1 ML), N, threads. Under FASTSLAM_BENCH_SMOKE=1:
 // N = 10^3, 60 scans. Google Benchmark's JSON: --benchmark_out=F --benchmark_out_format=json
@@ -18,12 +18,13 @@
 
 #include "bench/bench_util.h"
 #include "engine/filter_config.h"
-#include "tools/scaling_study.h"
+#include "tools/studies/scaling_study.h"
 
 namespace fastslam::engine {
 namespace {
 
-// One point of the scaling study (tools/scaling_study.h), which owns the setup and the timing.
+// One point of the scaling study (tools/studies/scaling_study.h), which owns the setup and the
+// timing.
 void BM_AssociationScaling(benchmark::State& state) {
   tools::ScalingOptions options;
   options.updates = static_cast<std::uint64_t>(bench::upto(500, 60));

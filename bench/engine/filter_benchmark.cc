@@ -17,8 +17,8 @@
 
 #include "bench/bench_util.h"
 #include "engine/filter.h"
-#include "tools/simulator.h"
-#include "tools/world.h"
+#include "tools/sim/simulator.h"
+#include "tools/sim/world.h"
 
 namespace fastslam::engine {
 namespace {

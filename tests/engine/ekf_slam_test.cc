@@ -25,8 +25,8 @@
 #include "tests/engine/test_util.h"
 #include "tests/engine/webmap_world.h"
 #include "tests/shared_data.h"
-#include "tools/simulator.h"
-#include "tools/world.h"
+#include "tools/sim/simulator.h"
+#include "tools/sim/world.h"
 
 namespace fastslam::engine {
 namespace {

@@ -33,9 +33,9 @@
 #include "parallel/resample.h"
 #include "tests/engine/webmap_world.h"
 #include "tests/shared_data.h"
-#include "tools/map_evaluation.h"
-#include "tools/simulator.h"
-#include "tools/world.h"
+#include "tools/eval/map_evaluation.h"
+#include "tools/sim/simulator.h"
+#include "tools/sim/world.h"
 
 namespace fastslam::engine {
 namespace {

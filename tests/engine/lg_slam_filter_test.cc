@@ -14,7 +14,7 @@
 #include "engine/proposal.h"
 #include "parallel/random_stream.h"
 #include "tests/engine/test_util.h"
-#include "tools/lg_slam_experiment.h"
+#include "tools/studies/lg_slam_experiment.h"
 
 namespace fastslam::engine {
 namespace {

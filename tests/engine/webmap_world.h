@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "tools/world.h"
+#include "tools/sim/world.h"
 
 namespace fastslam::engine::testing {
 

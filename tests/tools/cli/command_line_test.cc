@@ -1,0 +1,235 @@
+#include "tools/cli/command_line.h"
+
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <string>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+namespace fastslam::tools {
+namespace {
+
+class CommandLine : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    path_ = (std::filesystem::temp_directory_path() /
+             ("fastslam_config_test_" + std::to_string(::getpid()) + ".json"))
+                .string();
+  }
+  void TearDown() override { std::filesystem::remove(path_); }
+
+  // Parses `args` for `fastslam run` with `json` as the config file; returns the options.
+  RunOptions run(const std::string& json, const std::string& args) {
+    std::ofstream(path_) << json;
+    CLI::App app;
+    RunOptions o;
+    RunWords w;
+    add_run_options(app, o, w);
+    app.parse(args + " --config " + path_, false);
+    apply_json_config(app, w.config);
+    finish_run_options(app, w, o);
+    return o;
+  }
+  std::string error_of(const std::string& json, const std::string& args = "") {
+    try {
+      run(json, args);
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    return "(no error)";
+  }
+  std::string path_;
+};
+
+TEST_F(CommandLine, ConfigSetsWhatFlagsSetAndFlagsWin) {
+  const RunOptions o = run(R"({"particles": 42, "seed": 9, "algorithm": "fastslam2",
+                               "world": "loop", "loop-length": 750.5, "no-progress": true,
+                               "sigma-range": 0.25, "resample": "every", "source": "log",
+                               "data": "x.log", "loops": 3})",
+                           "--particles 7 --world grid");
+  EXPECT_EQ(o.filter.particles, 7u);  // the flag wins
+  EXPECT_EQ(o.world, "grid");         // the flag wins
+  EXPECT_EQ(o.filter.seed, 9u);
+  EXPECT_EQ(o.filter.algorithm, engine::Algorithm::kFastSlam2);
+  EXPECT_EQ(o.loop_length, 750.5);
+  EXPECT_FALSE(o.progress);
+  ASSERT_TRUE(o.noise.sigma_range.has_value());
+  EXPECT_EQ(*o.noise.sigma_range, 0.25);
+  EXPECT_FALSE(o.noise.sigma_bearing.has_value());  // not given anywhere: the source's
+  EXPECT_EQ(o.filter.resample.when, parallel::ResamplePolicy::When::kEveryStep);
+  EXPECT_EQ(o.source, "log");
+  EXPECT_EQ(o.data, "x.log");
+  EXPECT_EQ(o.sim.loops, 3);
+}
+
+TEST_F(CommandLine, WithoutConfigTheDefaultsStand) {
+  const RunOptions o = run("{}", "--sigma-u1 0.1");
+  EXPECT_EQ(o.filter.particles, 100u);
+  EXPECT_TRUE(o.progress);
+  EXPECT_EQ(o.sim.loops, 1);
+  // The built-in stress run: a grid of 10^5 landmarks, FastSLAM 1.0, known ids, the grid's
+  // spacing and scan period (resolved by the run, tools/cli/run_command.h).
+  EXPECT_EQ(o.source, "sim");
+  EXPECT_EQ(o.world, "grid");
+  EXPECT_TRUE(o.landmarks_csv.empty());
+  EXPECT_EQ(o.landmarks, 100'000u);
+  EXPECT_FALSE(o.spacing.has_value());
+  EXPECT_FALSE(o.scan_period.has_value());
+  EXPECT_EQ(o.sim.dt_observe, SimConfig{}.dt_observe);  // Bailey's, for CSV worlds
+  EXPECT_EQ(o.filter.algorithm, engine::Algorithm::kFastSlam1);
+  EXPECT_EQ(o.filter.association, engine::Association::kKnown);
+  EXPECT_FALSE(o.noise.sigma_range.has_value());
+  ASSERT_TRUE(o.noise.sigma_control1.has_value());
+  EXPECT_EQ(*o.noise.sigma_control1, 0.1);
+}
+
+TEST_F(CommandLine, SpacingAndScanPeriodAreSetOnlyWhenGiven) {
+  RunOptions o = run(R"({"spacing": 7.5})", "--scan-period 0.4");
+  ASSERT_TRUE(o.spacing.has_value());
+  EXPECT_EQ(*o.spacing, 7.5);
+  ASSERT_TRUE(o.scan_period.has_value());
+  EXPECT_EQ(*o.scan_period, 0.4);
+  o = run(R"({"scan-period": 2})", "--spacing 4");
+  EXPECT_EQ(o.spacing.value_or(0), 4.0);
+  EXPECT_EQ(o.scan_period.value_or(0), 2.0);
+  EXPECT_NE(error_of("{}", "--scan-period 0").find("--scan-period"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--spacing -1").find("--spacing"), std::string::npos);
+}
+
+TEST_F(CommandLine, ThreadsGrainAndSplit) {
+  RunOptions o = run(R"({"split-seconds": 0})", "--threads 2 --grain 16");
+  EXPECT_EQ(o.filter.threads, 2u);
+  EXPECT_EQ(o.filter.grain, 16u);
+  EXPECT_EQ(o.filter.split_seconds, 0.0);
+  o = run("{}", "");
+  EXPECT_EQ(o.filter.split_seconds, engine::FilterConfig{}.split_seconds);
+  EXPECT_NE(error_of("{}", "--split-seconds -1").find("--split-seconds"), std::string::npos);
+}
+
+TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
+  std::string e = error_of(R"({"particles": 10, "partcles": 5})");
+  EXPECT_NE(e.find(path_ + ": key 'partcles': unknown option"), std::string::npos) << e;
+  e = error_of(R"({"config": "other.json"})");
+  EXPECT_NE(e.find("key 'config': unknown option"), std::string::npos) << e;
+  e = error_of(R"({"particles": 0})");
+  EXPECT_NE(e.find("key 'particles':"), std::string::npos) << e;
+  e = error_of(R"({"world": "moon"})");
+  EXPECT_NE(e.find("key 'world':"), std::string::npos) << e;
+  e = error_of(R"({"particles": "many"})");
+  EXPECT_NE(e.find("key 'particles':"), std::string::npos) << e;
+  e = error_of(R"({"spacing": [1, 2]})");
+  EXPECT_NE(e.find("key 'spacing': value must be a number, a string or a boolean"),
+            std::string::npos)
+      << e;
+  e = error_of(R"([1, 2])");
+  EXPECT_NE(e.find(": expected one JSON object"), std::string::npos) << e;
+  e = error_of(R"({"particles": 10,)");
+  EXPECT_NE(e.find(": not valid JSON"), std::string::npos) << e;
+}
+
+// The simulator's true noises and the trace are plain options; the filter's noise overrides stay
+// unset, so the filter takes the simulator's noises from the source's header.
+TEST_F(CommandLine, SimulatorNoiseAndTraceOptions) {
+  RunOptions o = run(R"({"sim-sigma-range": 0.05, "trace-every": 4})",
+                     "--sim-sigma-speed 0.6 --sim-sigma-steer 0.1 --sim-sigma-bearing 0.02 "
+                     "--trace t.csv");
+  EXPECT_EQ(o.sim.sigma_v, 0.6);
+  EXPECT_EQ(o.sim.sigma_steer, 0.1);
+  EXPECT_EQ(o.sim.sigma_range, 0.05);
+  EXPECT_EQ(o.sim.sigma_bearing, 0.02);
+  EXPECT_FALSE(o.noise.sigma_range.has_value());
+  EXPECT_FALSE(o.noise.sigma_control0.has_value());
+  EXPECT_EQ(o.trace, "t.csv");
+  EXPECT_EQ(o.trace_every, 4u);
+  o = run("{}", "");
+  EXPECT_EQ(o.sim.sigma_v, SimConfig{}.sigma_v);
+  EXPECT_TRUE(o.trace.empty());
+  EXPECT_EQ(o.trace_every, 1u);
+  EXPECT_NE(error_of("{}", "--sim-sigma-speed -1").find("sim-sigma-speed"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--sim-sigma-range 0").find("sim-sigma-range"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--trace-every 0").find("trace-every"), std::string::npos);
+}
+
+// --source victoria-park brings its negative-information preset (tools/datasets/victoria_park.h)
+// for the options not given; a flag or a config key still wins; other sources keep the engine's.
+TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
+  const VictoriaParkFilterDefaults vp;
+  const engine::ExistenceConfig engine_defaults;
+  RunOptions o = run("{}", "--source victoria-park");
+  EXPECT_EQ(o.filter.existence.range_margin, vp.existence_range_margin);
+  EXPECT_EQ(o.filter.existence.missed, vp.existence_missed);
+  EXPECT_NE(vp.existence_range_margin, engine_defaults.range_margin);  // the test can fail
+  o = run(R"({"existence-range-margin": 2.5})", "--source victoria-park --existence-missed 1");
+  EXPECT_EQ(o.filter.existence.range_margin, 2.5);
+  EXPECT_EQ(o.filter.existence.missed, 1.0);
+  EXPECT_FALSE(o.noise.sigma_range.has_value());  // FastSLAM 1.0: the header's noises
+  o = run("{}", "--source victoria-park --algorithm fastslam2 --sigma-range 0.7");
+  EXPECT_EQ(*o.noise.sigma_range, 0.7);
+  EXPECT_EQ(*o.noise.sigma_bearing, vp.fastslam2_sigma_bearing);
+  o = run("{}", "--source sim --algorithm fastslam2");
+  EXPECT_FALSE(o.noise.sigma_bearing.has_value());
+  EXPECT_EQ(o.filter.existence.range_margin, engine_defaults.range_margin);
+  EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
+}
+
+// `fastslam run --out` draws map.png unless --no-plot (tools/cli/run_command.h).
+TEST_F(CommandLine, PlotScriptUnlessNoPlot) {
+  RunOptions o = run("{}", "");
+  EXPECT_EQ(o.plot_script, default_plot_script());
+  EXPECT_NE(o.plot_script.find("plot_run.py"), std::string::npos);
+  EXPECT_TRUE(run("{}", "--no-plot").plot_script.empty());
+  EXPECT_TRUE(run(R"({"no-plot": true})", "").plot_script.empty());
+}
+
+TEST_F(CommandLine, MotionNoneAndTheStartHeading) {
+  RunOptions o = run("{}", "");
+  EXPECT_EQ(o.motion, "odometry");
+  EXPECT_FALSE(o.initial_heading.has_value());
+  o = run(R"({"motion": "none"})", "--initial-heading-deg 90 --heading-fit-seconds 12");
+  EXPECT_EQ(o.motion, "none");
+  ASSERT_TRUE(o.initial_heading.has_value());
+  EXPECT_DOUBLE_EQ(*o.initial_heading, std::numbers::pi / 2);
+  EXPECT_EQ(o.victoria_park.heading_fit_seconds, 12.0);
+  EXPECT_EQ(run("{}", "--motion none-curvature").motion, "none-curvature");
+  EXPECT_NE(error_of("{}", "--motion bogus").find("--motion"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--heading-fit-seconds 0").find("--heading-fit-seconds"),
+            std::string::npos);
+}
+
+// The Victoria Park gate: metres and degrees on the command line, the reader's defaults unless
+// given, config keys as for every flag, bad values refused naming the flag.
+TEST_F(CommandLine, VictoriaParkGateFlags) {
+  const VictoriaParkGate defaults;
+  RunOptions o = run("{}", "");
+  EXPECT_EQ(o.victoria_park.gate.min_range, defaults.min_range);
+  EXPECT_EQ(o.victoria_park.gate.max_range, defaults.max_range);
+  EXPECT_EQ(o.victoria_park.gate.min_bearing, defaults.min_bearing);
+  EXPECT_EQ(o.victoria_park.gate.max_bearing, defaults.max_bearing);
+  EXPECT_EQ(o.victoria_park.gate.max_diameter, defaults.max_diameter);
+  o = run(R"({"vp-max-range": 40, "vp-min-bearing-deg": -45})",
+          "--vp-min-range 2 --vp-max-bearing-deg 60 --vp-max-diameter 0.9");
+  EXPECT_EQ(o.victoria_park.gate.min_range, 2.0);
+  EXPECT_EQ(o.victoria_park.gate.max_range, 40.0);
+  EXPECT_DOUBLE_EQ(o.victoria_park.gate.min_bearing, -std::numbers::pi / 4);
+  EXPECT_DOUBLE_EQ(o.victoria_park.gate.max_bearing, std::numbers::pi / 3);
+  EXPECT_EQ(o.victoria_park.gate.max_diameter, 0.9);
+  EXPECT_EQ(o.victoria_park.laser_yaw, 0.0);
+  EXPECT_DOUBLE_EQ(run("{}", "--vp-laser-yaw-deg -0.5").victoria_park.laser_yaw,
+                   -0.5 * std::numbers::pi / 180);
+  // The laser's place on the car (the model's a and b): the README's values unless given.
+  const engine::VictoriaParkGeometry nominal;
+  EXPECT_EQ(o.victoria_park.geometry.a, nominal.a);
+  EXPECT_EQ(o.victoria_park.geometry.b, nominal.b);
+  o = run(R"({"vp-laser-y": 0.25})", "--vp-laser-x 3.6");
+  EXPECT_EQ(o.victoria_park.geometry.a, 3.6);
+  EXPECT_EQ(o.victoria_park.geometry.b, 0.25);
+  EXPECT_EQ(o.victoria_park.geometry.l, nominal.l);
+  EXPECT_NE(error_of("{}", "--vp-laser-x 0").find("--vp-laser-x"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--vp-max-diameter 0").find("--vp-max-diameter"), std::string::npos);
+  EXPECT_NE(error_of("{}", "--vp-min-range -1").find("--vp-min-range"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace fastslam::tools

@@ -1,0 +1,85 @@
+#include "tools/io/csv.h"
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace fastslam::tools {
+namespace {
+
+class CsvTest : public ::testing::Test {
+ protected:
+  std::string write(const std::string& text) {
+    path_ = (std::filesystem::temp_directory_path() /
+             ("fastslam_csv_test_" + std::to_string(::getpid()) + ".csv"))
+                .string();
+    std::ofstream(path_) << text;
+    return path_;
+  }
+  void TearDown() override { std::filesystem::remove(path_); }
+
+  // The message of the error reading `text` raises.
+  std::string error_of(const std::string& text) {
+    const std::string path = write(text);
+    try {
+      CsvReader reader(path, {"id", "x_m", "y_m"});
+      std::array<double, 3> row{};
+      while (reader.next(row)) {
+      }
+    } catch (const std::runtime_error& e) {
+      return e.what();
+    }
+    return "";
+  }
+  std::string path_;
+};
+
+TEST_F(CsvTest, ReadsRowsAndSkipsBlankLines) {
+  const std::string path = write("id,x_m,y_m\n1,2.5,-3\n\n2, 4e1 ,5\r\n");
+  CsvReader reader(path, {"id", "x_m", "y_m"});
+  std::array<double, 3> row{};
+  ASSERT_TRUE(reader.next(row));
+  EXPECT_EQ(row, (std::array<double, 3>{1, 2.5, -3}));
+  ASSERT_TRUE(reader.next(row));
+  EXPECT_EQ(row, (std::array<double, 3>{2, 40, 5}));
+  EXPECT_FALSE(reader.next(row));
+}
+
+TEST_F(CsvTest, RefusesMalformedInputNamingFileLineAndReason) {
+  {
+    const std::string e = error_of("id,x_m\n");
+    EXPECT_NE(e.find(":1: header is 'id,x_m', expected 'id,x_m,y_m'"), std::string::npos) << e;
+  }
+  {
+    const std::string e = error_of("id,x_m,y_m\n1,2,3\n1,2\n");
+    EXPECT_NE(e.find(":3: expected 3 columns, found 2"), std::string::npos) << e;
+  }
+  {
+    const std::string e = error_of("id,x_m,y_m\n1,abc,3\n");
+    EXPECT_NE(e.find(":2: column 'x_m': 'abc' is not a number"), std::string::npos) << e;
+  }
+  {
+    const std::string e = error_of("id,x_m,y_m\n1,2.5x,3\n");
+    EXPECT_NE(e.find(":2: column 'x_m': '2.5x' is not a number"), std::string::npos) << e;
+  }
+  {
+    const std::string e = error_of("id,x_m,y_m\n1,nan,3\n");
+    EXPECT_NE(e.find(":2: column 'x_m': value 'nan' is not finite"), std::string::npos) << e;
+  }
+  {
+    const std::string e = error_of("id,x_m,y_m\n1,,3\n");
+    EXPECT_NE(e.find(":2: column 'x_m': '' is not a number"), std::string::npos) << e;
+  }
+  {
+    const std::string e = error_of("");
+    EXPECT_NE(e.find(":0: empty file"), std::string::npos) << e;
+  }
+  EXPECT_THROW(CsvReader("/nonexistent/file.csv", {"a"}), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace fastslam::tools

@@ -1,0 +1,267 @@
+#include "tools/io/log_format.h"
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+#include <unistd.h>
+#include <utility>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tests/tools/temp_path.h"
+
+namespace fastslam::tools {
+namespace {
+
+// A log with every record kind and awkward doubles (not short in decimal, subnormal, -0, huge).
+Log sample_log(engine::MotionKind kind) {
+  Log log;
+  LogHeader& h = log.header;
+  h.motion.kind = kind;
+  h.motion.wheelbase = 2.0 / 3.0;
+  h.motion.geometry = {3.78, 0.5, 2.83, 0.76};
+  h.motion.sigma_control[0] = 0.1 + 0.2;
+  h.motion.sigma_control[1] = std::numbers::pi / 60;
+  h.sensor.sigma_range = 0.1;
+  h.sensor.sigma_bearing = std::numbers::pi / 180;
+  h.sensor.max_range = 30.000000000000004;
+  h.sensor.field_of_view = std::numbers::pi;
+  h.sensor.offset = {0.25, -0.125, 1e-300};
+  h.start_time = -0.0;
+  h.start_pose[0] = -67.649271;
+  h.start_pose[1] = 4.9e-324;  // the smallest subnormal
+  h.start_pose[2] = 0.6632251157578453;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-100.0, 100.0);
+  double t = 0.0;
+  for (int k = 0; k < 50; ++k) {
+    t += 0.025;
+    Event c;
+    c.kind = EventKind::kControl;
+    c.time = t;
+    c.dt = 0.025;
+    c.control = {u(rng), u(rng) / 1000};
+    log.events.push_back(c);
+    Event p;
+    p.kind = EventKind::kTruthPose;
+    p.time = t;
+    p.x = u(rng);
+    p.y = u(rng) * 1e20;
+    p.theta = std::remainder(u(rng), 2 * std::numbers::pi);
+    log.events.push_back(p);
+    if (k % 5 == 0) {
+      Event s;
+      s.kind = EventKind::kScan;
+      s.time = t;
+      s.first = log.observations.size();
+      s.count = static_cast<std::uint32_t>(k % 4);  // empty scans too
+      for (std::uint32_t j = 0; j < s.count; ++j) {
+        log.observations.push_back(
+            {std::abs(u(rng)) + 1e-9, u(rng) / 50, j % 2 == 0 ? std::int64_t{-1} : k * 10 + j});
+      }
+      log.events.push_back(s);
+    }
+    if (k % 8 == 0) {
+      Event g;
+      g.kind = EventKind::kGps;
+      g.time = t;
+      g.x = u(rng);
+      g.y = u(rng);
+      log.events.push_back(g);
+    }
+  }
+  log.landmarks = {{0, 1.5, -2.5}, {7, u(rng), u(rng)}, {std::uint64_t{1} << 40, 1e-17, 3e17}};
+  return log;
+}
+
+TEST(LogFormat, RoundTripIsBitExactForEveryMotionKind) {
+  for (auto kind : {engine::MotionKind::kBaileyCar, engine::MotionKind::kUnicycle,
+                    engine::MotionKind::kVictoriaPark, engine::MotionKind::kBrownian,
+                    engine::MotionKind::kBrownianCurvature}) {
+    const Log log = sample_log(kind);
+    std::stringstream text;
+    write_log(text, log);
+    const Log back = read_log(text, "memory");
+    EXPECT_TRUE(back == log) << engine::to_string(kind);
+    EXPECT_EQ(back.header.motion.kind, kind);
+    if (kind == engine::MotionKind::kBrownianCurvature) {
+      EXPECT_NE(text.str().find("\nmotion none-curvature\n"), std::string::npos) << text.str();
+    }
+    EXPECT_EQ(back.events.size(), log.events.size());
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(back.header.start_pose[1]),
+              std::bit_cast<std::uint64_t>(4.9e-324));
+    EXPECT_TRUE(std::signbit(back.header.start_time));  // -0 stays -0
+    // Writing what was read gives the same text.
+    std::stringstream again;
+    write_log(again, back);
+    EXPECT_EQ(again.str(), text.str());
+  }
+}
+
+TEST(LogFormat, EqualityNoticesAOneUlpChange) {
+  const Log log = sample_log(engine::MotionKind::kBaileyCar);
+  Log other = log;
+  other.observations[1].bearing = std::nextafter(other.observations[1].bearing, 10.0);
+  EXPECT_FALSE(other == log);
+  other = log;
+  other.events[3].control.u1 = std::nextafter(other.events[3].control.u1, 10.0);
+  EXPECT_FALSE(other == log);
+}
+
+TEST(LogFormat, FileRoundTripAndTheDocumentedShape) {
+  const Log log = sample_log(engine::MotionKind::kVictoriaPark);
+  const std::string path = testing::temp_path("log_test") + ".log";
+  write_log(path, log);
+  EXPECT_TRUE(read_log(path) == log);
+  std::ifstream in(path);
+  std::string first, motion;
+  std::getline(in, first);
+  EXPECT_EQ(first, "fastslam-log 1");
+  while (std::getline(in, motion) && motion.rfind("motion", 0) != 0) {
+  }
+  EXPECT_EQ(motion, "motion victoria-park 3.78 0.5 2.83 0.76");
+  std::filesystem::remove(path);
+}
+
+constexpr const char* kHeader =
+    "fastslam-log 1\n"
+    "motion bailey-car 4\n"
+    "control_noise 0.3 0.05\n"
+    "sensor 0.1 0.017 30 3.14 0 0 0\n"
+    "start 0 0 0 0\n"
+    "end_header\n";  // records start on line 7
+
+std::string error_of(const std::string& text) {
+  std::istringstream in(text);
+  try {
+    read_log(in, "x.log");
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(LogFormat, ReadsCommentsBlankLinesAndUnknownIds) {
+  std::istringstream in(std::string(kHeader) +
+                        "# a comment\n\ncontrol 0.5 0.5 3 0.1\r\nscan 0.5 2 10 0.5 - 20 -0.5 3\n"
+                        "gps 0.6 1 2\nlandmark 3 5 6\n");
+  const Log log = read_log(in, "x.log");
+  ASSERT_EQ(log.events.size(), 3u);
+  EXPECT_EQ(log.events[1].kind, EventKind::kScan);
+  EXPECT_EQ(log.events[1].count, 2u);
+  ASSERT_EQ(log.observations.size(), 2u);
+  EXPECT_EQ(log.observations[0].id, -1);
+  EXPECT_EQ(log.observations[1].id, 3);
+  EXPECT_EQ(log.observations[1].bearing, -0.5);
+  EXPECT_EQ(log.header.motion.wheelbase, 4.0);
+  ASSERT_EQ(log.landmarks.size(), 1u);
+  EXPECT_EQ(log.landmarks[0], (TruthLandmark{3, 5, 6}));
+}
+
+TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
+  const std::string h = kHeader;
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"", "x.log:0: empty file"},
+      {"fastslam-log 2\n", "x.log:1: unsupported version 2"},
+      {"hello 1\n", "x.log:1: not a fastslam log"},
+      {"fastslam-log 1\nmotion bailey-car 4\n", "x.log:2: end of file inside the header"},
+      {"fastslam-log 1\nmotion bicycle 4\n", "x.log:2: unknown motion kind 'bicycle'"},
+      {"fastslam-log 1\nmotion bailey-car\n", "x.log:2: 'motion' needs 3 fields"},
+      {"fastslam-log 1\nmotion bailey-car -4\n", "x.log:2: wheelbase must be > 0"},
+      {"fastslam-log 1\nmotion none-curvature 0.1\n", "x.log:2: 'motion' needs 2 fields"},
+      {"fastslam-log 1\nmotion none_curvature\n",
+       "x.log:2: unknown motion kind 'none_curvature' (bailey-car, victoria-park, unicycle, none "
+       "or none-curvature)"},
+      {"fastslam-log 1\nmotion none-curvature\ncontrol_noise 0.1 -0.01\n",
+       "x.log:3: sigma1 must be >= 0"},
+      {"fastslam-log 1\nmotion unicycle\nmotion unicycle\n",
+       "x.log:3: header line 'motion' is "
+       "repeated"},
+      {"fastslam-log 1\ncolour blue\n", "x.log:2: unknown header line 'colour'"},
+      {"fastslam-log 1\nmotion unicycle\ncontrol_noise 1 1\nsensor 1 1 1 1 0 0 0\nend_header\n",
+       "x.log:5: header has no 'start' line"},
+      {"fastslam-log 1\nsensor 1 0 1 1 0 0 0\n", "x.log:2: sigma_bearing must be > 0"},
+      {"fastslam-log 1\nsensor 1 1 1 7 0 0 0\n", "x.log:2: field_of_view must be at most 2 pi"},
+      {"fastslam-log 1\ncontrol 1 1 1 1\n", "x.log:2: unknown header line 'control'"},
+      // Records.
+      {h + "jump 1 2\n", "x.log:7: unknown record 'jump'"},
+      {h + "control 1 0.1 3\n", "x.log:7: 'control' needs 5 fields"},
+      {h + "control 1 0.1 3 4 5\n", "x.log:7: 'control' needs 5 fields"},
+      {h + "control 1 0.1 three 0\n", "x.log:7: u0: 'three' is not a number"},
+      {h + "control 1 0.1 3x 0\n", "x.log:7: u0: '3x' is not a number"},
+      {h + "control 1 0.1 nan 0\n", "x.log:7: u0: 'nan' is not finite"},
+      {h + "control 1 0.1 0 inf\n", "x.log:7: u1: 'inf' is not finite"},
+      {h + "control 1 -0.1 0 0\n", "x.log:7: dt is negative"},
+      {h + "control 2 0.1 0 0\ncontrol 1 0.1 0 0\n", "x.log:8: time goes backwards: 1 after 2"},
+      {h + "control -1 0.1 0 0\n", "x.log:7: time goes backwards: -1 after 0"},
+      {h + "gps 2 0 0\npose 1.5 0 0 0\n", "x.log:8: time goes backwards"},
+      {h + "scan 1 2 5 0.1 -\n", "x.log:7: scan of 2 observations needs 9 fields, found 6"},
+      {h + "scan 1 1 5 0.1 - 7\n", "x.log:7: scan of 1 observations needs 6 fields, found 7"},
+      {h + "scan 1 -1\n", "x.log:7: observation count: '-1' is not a non-negative integer"},
+      {h + "scan 1\n", "x.log:7: scan needs"},
+      {h + "scan 1 1 -5 0.1 -\n", "x.log:7: range must be > 0 (got -5)"},
+      {h + "scan 1 1 0 0.1 -\n", "x.log:7: range must be > 0 (got 0)"},
+      {h + "scan 1 1 5 NaN -\n", "x.log:7: bearing: 'NaN' is not finite"},
+      {h + "scan 1 1 5 0.1 -3\n", "x.log:7: id: '-3' is not a non-negative integer"},
+      {h + "scan 1 1 5 0.1 2.5\n", "x.log:7: id: '2.5' is not a non-negative integer"},
+      {h + "pose 1 0 0\n", "x.log:7: 'pose' needs 5 fields"},
+      {h + "gps 1 0 0 0\n", "x.log:7: 'gps' needs 4 fields"},
+      {h + "landmark 1 0 0\nlandmark 1 2 2\n", "x.log:8: landmark id 1 is repeated"},
+      {h + "landmark 1 0\n", "x.log:7: 'landmark' needs 4 fields"},
+      {h + "end_header\n", "x.log:7: unknown record 'end_header'"},
+  };
+  for (const auto& [text, expected] : cases) {
+    const std::string e = error_of(text);
+    EXPECT_NE(e.find(expected), std::string::npos) << "got: " << e << "\nexpected: " << expected;
+  }
+}
+
+TEST(LogFormat, NothingPartialAndAMissingFileIsNamed) {
+  EXPECT_THROW(read_log("/nonexistent/dir/x.log"), std::runtime_error);
+  try {
+    read_log("/nonexistent/dir/x.log");
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/dir/x.log: cannot open"), std::string::npos);
+  }
+}
+
+TEST(LogFormat, WriterRefusesWhatWouldNotReadBack) {
+  Log log = sample_log(engine::MotionKind::kBaileyCar);
+  std::ostringstream sink;
+  {
+    Log bad = log;
+    std::swap(bad.events[0], bad.events[4]);  // out of time order
+    EXPECT_THROW(write_log(sink, bad), std::invalid_argument);
+  }
+  {
+    Log bad = log;
+    bad.events[1].x = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_THROW(write_log(sink, bad), std::invalid_argument);
+  }
+  {
+    Log bad = log;
+    bad.observations.resize(1);
+    EXPECT_THROW(write_log(sink, bad), std::invalid_argument);
+  }
+  {
+    Log bad = log;
+    bad.observations[0].range = -1;
+    EXPECT_THROW(write_log(sink, bad), std::invalid_argument);
+  }
+  // To a path: nothing is left behind.
+  Log bad = log;
+  bad.header.sensor.max_range = std::numeric_limits<double>::infinity();
+  const std::string path = testing::temp_path("log_bad") + ".log";
+  EXPECT_THROW(write_log(path, bad), std::invalid_argument);
+  EXPECT_FALSE(std::filesystem::exists(path));
+}
+
+}  // namespace
+}  // namespace fastslam::tools

@@ -1,0 +1,171 @@
+#include "tools/sim/simulator.h"
+
+#include <cmath>
+#include <numbers>
+#include <set>
+
+#include <gtest/gtest.h>
+
+#include "tests/shared_data.h"
+
+namespace fastslam::tools {
+namespace {
+
+World webmap(const std::string& shared) {
+  return read_world_csv(shared + "/data/bailey_sim/example_webmap_landmarks.csv",
+                        shared + "/data/bailey_sim/example_webmap_waypoints.csv");
+}
+
+// A small world that needs no files: a square route with landmarks around it.
+World square_world() {
+  World world;
+  world.waypoints = {{40, 0}, {40, 40}, {0, 40}, {0, 0}};
+  for (int i = -2; i <= 6; ++i) {
+    for (int j = -2; j <= 6; ++j) world.landmarks.push_back({i * 8.0 + 1.5, j * 8.0 - 2.5});
+  }
+  return world;
+}
+
+TEST(Simulator, WebmapHasTheReferenceStepAndScanCounts) {
+  FASTSLAM_REQUIRE_SHARED(shared);
+  const World world = webmap(shared);
+  Simulator sim(world, SimConfig{}, 1);
+  SimStep step;
+  std::uint64_t steps = 0, scans = 0, observations = 0;
+  while (sim.next(step)) {
+    ++steps;
+    scans += step.has_scan;
+    observations += step.scan.size();
+  }
+  // The MATLAB original on webmap: 17382 control steps and 1931 scans (two loops).
+  EXPECT_EQ(steps, 17382u);
+  EXPECT_EQ(scans, 1931u);
+  // About one landmark in the front half circle per scan (2.2 in the full circle, measured along
+  // the route by brute force).
+  EXPECT_GT(observations, 9 * scans / 10);
+  EXPECT_LT(observations, 13 * scans / 10);
+  EXPECT_FALSE(sim.next(step));
+}
+
+TEST(Simulator, ScansSeeExactlyTheLandmarksInRangeAndInFront) {
+  const World world = square_world();
+  SimConfig config;
+  config.max_range = 15.0;
+  config.loops = 1;
+  Simulator sim(world, config, 9);
+  SimStep step;
+  int scans = 0;
+  while (sim.next(step)) {
+    if (!step.has_scan) continue;
+    ++scans;
+    std::set<std::uint32_t> expected;
+    for (std::uint32_t i = 0; i < world.landmarks.size(); ++i) {
+      const double dx = world.landmarks[i].x - step.truth.x;
+      const double dy = world.landmarks[i].y - step.truth.y;
+      // Bailey's get_visible_landmarks: the half plane ahead and the range circle.
+      if (dx * std::cos(step.truth.theta) + dy * std::sin(step.truth.theta) > 0 &&
+          dx * dx + dy * dy < config.max_range * config.max_range &&
+          dx * dx + dy * dy >= config.min_range * config.min_range) {
+        expected.insert(i);
+      }
+    }
+    std::set<std::uint32_t> seen;
+    for (const SimObservation& z : step.scan) seen.insert(z.landmark);
+    ASSERT_EQ(seen, expected) << "scan at step " << step.index;
+  }
+  EXPECT_GT(scans, 20);
+}
+
+TEST(Simulator, NoiseFreeRunFollowsTheRouteAndMeasuresExactly) {
+  const World world = square_world();
+  SimConfig config;
+  config.control_noise = false;
+  config.sensor_noise = false;
+  config.loops = 1;
+  Simulator sim(world, config, 1);
+  SimStep step;
+  std::vector<double> closest(world.waypoints.size(), INFINITY);
+  while (sim.next(step)) {
+    EXPECT_EQ(step.speed, config.speed);
+    for (std::size_t w = 0; w < world.waypoints.size(); ++w) {
+      closest[w] = std::min(closest[w], std::hypot(world.waypoints[w].x - step.truth.x,
+                                                   world.waypoints[w].y - step.truth.y));
+    }
+    for (const SimObservation& z : step.scan) {
+      const Point& l = world.landmarks[z.landmark];
+      EXPECT_NEAR(z.range, std::hypot(l.x - step.truth.x, l.y - step.truth.y), 1e-12);
+      EXPECT_NEAR(std::remainder(z.bearing - (std::atan2(l.y - step.truth.y, l.x - step.truth.x) -
+                                              step.truth.theta),
+                                 2 * std::numbers::pi),
+                  0.0, 1e-12);
+      EXPECT_GT(z.bearing, -std::numbers::pi);
+      EXPECT_LE(z.bearing, std::numbers::pi);
+    }
+  }
+  for (double d : closest) EXPECT_LT(d, config.at_waypoint);
+}
+
+TEST(Simulator, ControlAndSensorNoiseHaveTheConfiguredSpread) {
+  const World world = square_world();
+  SimConfig config;
+  config.loops = 20;
+  Simulator sim(world, config, 4);
+  SimStep step;
+  double sum = 0, sum_sq = 0, n = 0;
+  double range_sq = 0, range_n = 0;
+  while (sim.next(step)) {
+    const double e = step.speed - config.speed;
+    sum += e;
+    sum_sq += e * e;
+    ++n;
+    for (const SimObservation& z : step.scan) {
+      const Point& l = world.landmarks[z.landmark];
+      const double r = z.range - std::hypot(l.x - step.truth.x, l.y - step.truth.y);
+      range_sq += r * r;
+      ++range_n;
+    }
+  }
+  ASSERT_GT(n, 10000);
+  // Mean within 6 standard errors; variance of a normal sample has relative sd sqrt(2/n).
+  EXPECT_NEAR(sum / n, 0.0, 6 * config.sigma_v / std::sqrt(n));
+  EXPECT_NEAR(sum_sq / n / (config.sigma_v * config.sigma_v), 1.0, 6 * std::sqrt(2 / n));
+  EXPECT_NEAR(range_sq / range_n / (config.sigma_range * config.sigma_range), 1.0,
+              6 * std::sqrt(2 / range_n));
+}
+
+TEST(Simulator, IsDeterministicPerSeed) {
+  const World world = square_world();
+  SimConfig config;
+  config.loops = 1;
+  auto run = [&](std::uint64_t seed) {
+    Simulator sim(world, config, seed);
+    std::vector<double> trace;
+    SimStep step;
+    while (sim.next(step)) {
+      trace.push_back(step.speed);
+      trace.push_back(step.steer);
+      for (const SimObservation& z : step.scan) trace.push_back(z.range + z.bearing);
+    }
+    return trace;
+  };
+  EXPECT_EQ(run(5), run(5));
+  EXPECT_NE(run(5), run(6));
+}
+
+TEST(Simulator, RefusesUnusableConfigurations) {
+  const World world = square_world();
+  SimConfig bad;
+  bad.dt = 0;
+  EXPECT_THROW(Simulator(world, bad, 1), std::invalid_argument);
+  bad = SimConfig{};
+  bad.sigma_v = -1;
+  EXPECT_THROW(Simulator(world, bad, 1), std::invalid_argument);
+  bad = SimConfig{};
+  bad.loops = 0;
+  EXPECT_THROW(Simulator(world, bad, 1), std::invalid_argument);
+  World empty;
+  EXPECT_THROW(Simulator(empty, SimConfig{}, 1), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace fastslam::tools

@@ -1,0 +1,371 @@
+#include "tools/cli/command_line.h"
+
+#include <fstream>
+#include <numbers>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+namespace fastslam::tools {
+namespace {
+
+using engine::Algorithm;
+using engine::Association;
+using parallel::ResamplePolicy;
+using parallel::ResampleScheme;
+
+// The world of a simulated source (shared by run and convert).
+void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  cmd.add_option("--landmarks-csv", o.landmarks_csv,
+                 "world landmarks (id,x_m,y_m), e.g. ../shared/data/bailey_sim/"
+                 "example_webmap_landmarks.csv")
+      ->check(CLI::ExistingFile);
+  cmd.add_option("--waypoints-csv", o.waypoints_csv, "world route (index,x_m,y_m)")
+      ->check(CLI::ExistingFile);
+  cmd.add_option("--world", o.world, "procedural world when no CSV is given")
+      ->check(CLI::IsMember({"grid", "loop"}))
+      ->capture_default_str();
+  cmd.add_option("--landmarks", o.landmarks, "landmarks of a grid world")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
+      ->capture_default_str();
+  cmd.add_option("--spacing", w.spacing,
+                 "metres per landmark in procedural worlds (default: 2 on a grid, 10 on a loop)")
+      ->check(CLI::PositiveNumber);
+  cmd.add_option("--loop-length", o.loop_length, "length of a loop world, metres")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--scan-period", w.scan_period,
+                 "seconds between simulated scans (default: 1 on a grid, else Bailey's 0.2)")
+      ->check(CLI::Range(0.001, 3600.0));
+  // The simulator's true noises. The filter assumes the same unless --sigma-* says otherwise
+  // (a simulated source's header carries these), so one flag scales both.
+  cmd.add_option("--sim-sigma-speed", o.sim.sigma_v,
+                 "simulated speed noise, m/s (true and, unless --sigma-u0, the filter's)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--sim-sigma-steer", o.sim.sigma_steer,
+                 "simulated steering noise, rad (true and, unless --sigma-u1, the filter's)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--sim-sigma-range", o.sim.sigma_range,
+                 "simulated range noise, m (true and, unless --sigma-range, the filter's)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--sim-sigma-bearing", o.sim.sigma_bearing,
+                 "simulated bearing noise, rad (true and, unless --sigma-bearing, the filter's)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--loops", w.loops,
+                 "times the route is driven (default: 2 for CSV worlds, 1 else)")
+      ->check(CLI::Range(1, 1000));
+}
+
+// The source's recommended filter settings, for each option the user did not give.
+template <class Given>
+void apply_filter_defaults(const FilterDefaults& d, const Given& given, RunOptions& o) {
+  if (d.existence_range_margin && !given("--existence-range-margin")) {
+    o.filter.existence.range_margin = *d.existence_range_margin;
+  }
+  if (d.existence_missed && !given("--existence-missed")) {
+    o.filter.existence.missed = *d.existence_missed;
+  }
+  if (o.filter.algorithm == Algorithm::kFastSlam2) {
+    if (d.fastslam2_sigma_range && !given("--sigma-range")) {
+      o.noise.sigma_range = d.fastslam2_sigma_range;
+    }
+    if (d.fastslam2_sigma_bearing && !given("--sigma-bearing")) {
+      o.noise.sigma_bearing = d.fastslam2_sigma_bearing;
+    }
+  }
+}
+
+void add_config_option(CLI::App& cmd, RunWords& w) {
+  cmd.add_option("--config", w.config,
+                 "JSON file of options (keys = long flag names without dashes); flags win")
+      ->check(CLI::ExistingFile);
+}
+
+// The Victoria Park reader's options (run and convert): heading fit, control cuts, the gate.
+void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  cmd.add_option("--heading-fit-seconds", o.victoria_park.heading_fit_seconds,
+                 "victoria-park: seconds of GPS after the first fix the start heading is fitted to")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("--split-controls", o.victoria_park.split_controls_at_scans,
+               "victoria-park: cut the odometry interval holding a scan at the scan time");
+  VictoriaParkGate& gate = o.victoria_park.gate;
+  cmd.add_option("--vp-min-range", gate.min_range,
+                 "victoria-park: detections nearer than this are dropped, m")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--vp-max-range", gate.max_range,
+                 "victoria-park: detections farther than this are dropped, m (also the range "
+                 "within which negative information expects trees)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--vp-min-bearing-deg", w.vp_min_bearing_deg,
+                 "victoria-park: detections right of this bearing are dropped, degrees "
+                 "(default -87.1: the detector's scan-edge margin)");
+  cmd.add_option(
+      "--vp-max-bearing-deg", w.vp_max_bearing_deg,
+      "victoria-park: detections left of this bearing are dropped, degrees (default 87.1)");
+  cmd.add_option(
+      "--vp-laser-yaw-deg", w.vp_laser_yaw_deg,
+      "victoria-park: the laser's yaw on the car, degrees counter-clockwise (default 0)");
+  cmd.add_option("--vp-laser-x", o.victoria_park.geometry.a,
+                 "victoria-park: the laser's distance ahead of the rear axle, m (the model's a)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--vp-laser-y", o.victoria_park.geometry.b,
+                 "victoria-park: the laser's offset left of the car's centre line, m (the "
+                 "model's b)")
+      ->capture_default_str();
+  cmd.add_option("--vp-max-diameter", gate.max_diameter,
+                 "victoria-park: detections wider than this are dropped, m (default: no limit)")
+      ->check(CLI::PositiveNumber);
+}
+
+// Option groups of `run`, defined at the end of the file.
+void add_association_options(CLI::App& cmd, RunOptions& o);
+void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w);
+void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w);
+
+}  // namespace
+
+void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  engine::FilterConfig& f = o.filter;
+  cmd.add_option("--source", o.source,
+                 "where events come from: a simulated world, a native log or a data set")
+      ->check(CLI::IsMember(source_names()))
+      ->capture_default_str();
+  cmd.add_option("--data", o.data,
+                 "a recorded source's file or directory: the log file (docs/log-format.md) or "
+                 "the data set's directory");
+  add_world_options(cmd, o, w);
+  cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
+      ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
+      ->capture_default_str();
+  cmd.add_option("--motion", o.motion,
+                 "odometry: the source's motion model; none: ignore the controls, Brownian "
+                 "velocities (eq. 79-81; --sigma-u0/--sigma-u1 are the v and omega increments); "
+                 "none-curvature: the same walking v and the path's curvature (1/m), so the "
+                 "heading cannot turn while the vehicle stands")
+      ->check(CLI::IsMember({"odometry", "none", "none-curvature"}))
+      ->capture_default_str();
+  cmd.add_option("--particles", f.particles, "particles (M)")
+      ->check(CLI::Range(1U, 100'000'000U))
+      ->capture_default_str();
+  cmd.add_option("--association", w.association,
+                 "data association: known (ids from the source), ml (maximum likelihood, "
+                 "eq. 64) or das (sampling, eq. 65)")
+      ->check(CLI::IsMember({"known", "ml", "das"}))
+      ->capture_default_str();
+  add_association_options(cmd, o);
+  add_execution_options(cmd, o, w);
+  cmd.add_option("--sigma-range", w.sigma_range,
+                 "filter range noise, m (default: the source's; the simulator keeps its own)")
+      ->check(CLI::PositiveNumber);
+  cmd.add_option("--sigma-bearing", w.sigma_bearing,
+                 "filter bearing noise, rad (default: the source's)")
+      ->check(CLI::PositiveNumber);
+  cmd.add_option("--sigma-u0", w.sigma_control0,
+                 "filter noise of the first control component (speed m/s for the cars, v for the "
+                 "unicycle, the v increment without odometry; default: the source's)")
+      ->check(CLI::NonNegativeNumber);
+  cmd.add_option("--sigma-u1", w.sigma_control1,
+                 "filter noise of the second control component (steering rad, omega, the omega "
+                 "increment; default: the source's)")
+      ->check(CLI::NonNegativeNumber);
+  cmd.add_option("--initial-heading-deg", w.initial_heading_deg,
+                 "start heading, degrees (default: the source's; victoria-park fits it to GPS)");
+  add_victoria_park_options(cmd, o, w);
+  add_output_options(cmd, o, w);
+}
+
+void add_convert_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  o.source = "sim";
+  cmd.add_option("--source", o.source, "what to convert: a simulated world or a data set")
+      ->check(CLI::IsMember(source_names()))
+      ->capture_default_str();
+  cmd.add_option("--data", o.data,
+                 "a recorded source's file or directory, e.g. ../shared/data/victoria_park")
+      ->check(CLI::ExistingPath);
+  add_world_options(cmd, o, w);
+  cmd.add_option("--seed", o.filter.seed, "random seed of the simulation")->capture_default_str();
+  add_victoria_park_options(cmd, o, w);
+  cmd.add_option("--out", o.out, "the log file to write (docs/log-format.md); required");
+  add_config_option(cmd, w);
+}
+
+void apply_json_config(CLI::App& cmd, const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open for reading");
+  nlohmann::json config;
+  try {
+    config = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(path + ": not valid JSON: " + e.what());
+  }
+  if (!config.is_object()) throw std::runtime_error(path + ": expected one JSON object");
+  for (const auto& [key, value] : config.items()) {
+    auto fail = [&](const std::string& what) {
+      throw std::runtime_error(path + ": key '" + key + "': " + what);
+    };
+    CLI::Option* option = key == "config" ? nullptr : cmd.get_option_no_throw("--" + key);
+    if (option == nullptr) fail("unknown option (keys are the long flag names without '--')");
+    if (option->count() > 0) continue;  // given on the command line: the flag wins
+    std::string text;
+    if (value.is_string()) {
+      text = value.get<std::string>();
+    } else if (value.is_boolean()) {
+      text = value.get<bool>() ? "true" : "false";
+    } else if (value.is_number()) {
+      text = value.dump();
+    } else {
+      fail("value must be a number, a string or a boolean");
+    }
+    try {
+      if (option->get_expected_min() == 0) {  // a flag: as CLI11's own config files do
+        text = option->get_flag_value(key, text);
+      }
+      option->add_result(text);
+      option->run_callback();
+    } catch (const CLI::Error& e) {
+      fail(e.what());
+    }
+  }
+}
+
+void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
+  const bool csv = !o.landmarks_csv.empty();
+  o.sim.loops = w.loops > 0 ? w.loops : (csv ? 2 : 1);
+  o.filter.algorithm = w.algorithm == "ekf"         ? Algorithm::kEkf
+                       : w.algorithm == "fastslam2" ? Algorithm::kFastSlam2
+                                                    : Algorithm::kFastSlam1;
+  o.filter.association = w.association == "ml"    ? Association::kMaximumLikelihood
+                         : w.association == "das" ? Association::kDataAssociationSampling
+                                                  : Association::kKnown;
+  o.filter.resample.when = w.resample == "every" ? ResamplePolicy::When::kEveryStep
+                                                 : ResamplePolicy::When::kEssBelowFraction;
+  o.filter.resample.scheme = w.scheme == "stratified"    ? ResampleScheme::kStratified
+                             : w.scheme == "multinomial" ? ResampleScheme::kMultinomial
+                                                         : ResampleScheme::kSystematic;
+  auto given = [&](const char* name) {
+    const CLI::Option* option = cmd.get_option_no_throw(name);
+    return option != nullptr && option->count() > 0;
+  };
+  if (given("--spacing")) o.spacing = w.spacing;
+  if (given("--scan-period")) o.scan_period = w.scan_period;
+  if (given("--sigma-range")) o.noise.sigma_range = w.sigma_range;
+  if (given("--sigma-bearing")) o.noise.sigma_bearing = w.sigma_bearing;
+  if (given("--sigma-u0")) o.noise.sigma_control0 = w.sigma_control0;
+  if (given("--sigma-u1")) o.noise.sigma_control1 = w.sigma_control1;
+  for (const SourceEntry& source : sources()) {
+    if (source.name == o.source) apply_filter_defaults(source.defaults, given, o);
+  }
+  if (given("--vp-min-bearing-deg")) {
+    o.victoria_park.gate.min_bearing = w.vp_min_bearing_deg * std::numbers::pi / 180;
+  }
+  if (given("--vp-max-bearing-deg")) {
+    o.victoria_park.gate.max_bearing = w.vp_max_bearing_deg * std::numbers::pi / 180;
+  }
+  if (given("--vp-laser-yaw-deg")) {
+    o.victoria_park.laser_yaw = w.vp_laser_yaw_deg * std::numbers::pi / 180;
+  }
+  if (given("--initial-heading-deg")) {
+    o.initial_heading = w.initial_heading_deg * std::numbers::pi / 180;
+  }
+}
+
+namespace {
+
+// Association, existence and the map's scoring (ml, das, ekf).
+void add_association_options(CLI::App& cmd, RunOptions& o) {
+  engine::FilterConfig& f = o.filter;
+  cmd.add_option("--log-p0", f.log_new_landmark,
+                 "ln p0, the log-likelihood of a new landmark (ml, das)")
+      ->capture_default_str();
+  cmd.add_option("--gate", f.gating.gate,
+                 "squared Mahalanobis gate for association candidates (ml, das)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("!--no-negative-information", f.existence.negative_information,
+               "never remove landmarks that were in view and not seen (ml, das)");
+  cmd.add_option("--existence-missed", f.existence.missed,
+                 "log-odds a landmark loses when in view and not seen (ml, das)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--existence-range-margin", f.existence.range_margin,
+                 "metres inside the sensor range where a missed landmark counts (ml, das)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--clutter", o.sim.clutter_rate,
+                 "simulated false alarms per scan (Poisson mean; ml, das)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
+                 "ekf with ml: associate when the squared Mahalanobis distance is below this")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--ekf-gate-new", f.ekf.gate_new,
+                 "ekf with ml: a new landmark when every squared Mahalanobis distance exceeds it")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
+               "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
+  cmd.add_option("--match-radius", o.match_radius,
+                 "metres within which estimated and true landmarks are paired (ml, das)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+}
+
+// Seed, threads and resampling.
+void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  engine::FilterConfig& f = o.filter;
+  cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
+      ->capture_default_str();
+  cmd.add_option("--threads", f.threads, "worker threads (0: all cores)")
+      ->check(CLI::Range(0U, 4096U))
+      ->capture_default_str();
+  cmd.add_option("--grain", f.grain, "particles per parallel task")
+      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 30))
+      ->capture_default_str();
+  cmd.add_option("--split-seconds", f.split_seconds,
+                 "a pass whose previous one took longer is split across the threads whatever "
+                 "--grain (0: always)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd.add_option("--resample", w.resample, "when to resample: every (scan) or neff")
+      ->check(CLI::IsMember({"every", "neff"}))
+      ->capture_default_str();
+  cmd.add_option("--neff-fraction", f.resample.ess_fraction,
+                 "with --resample neff: resample when N_eff < fraction x M")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd.add_option("--resample-scheme", w.scheme, "how to draw the ancestors")
+      ->check(CLI::IsMember({"systematic", "stratified", "multinomial"}))
+      ->capture_default_str();
+}
+
+// What a run writes: the output directory, the trace, the progress bar, the picture.
+void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
+  cmd.add_option("--out", o.out,
+                 "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
+  cmd.add_option("--trace", o.trace,
+                 "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
+                 "landmark RMSE of the seen landmarks, landmarks in the map)");
+  cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
+      ->capture_default_str();
+  cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
+  o.plot_script = default_plot_script();
+  cmd.add_flag_callback(
+      "--no-plot", [&o] { o.plot_script.clear(); },
+      "with --out: no map.png (drawn by tools/scripts/plot_run.py with matplotlib, or "
+      "$FASTSLAM_PLOT_SCRIPT)");
+  add_config_option(cmd, w);
+}
+
+}  // namespace
+
+}  // namespace fastslam::tools

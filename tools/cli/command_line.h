@@ -1,0 +1,51 @@
+// The `fastslam` command line's options (CLI11): `run` and `convert` options bound to a
+// `RunOptions`, the words turned into the config's enums after parsing, and `--config FILE.json`
+// for everything the flags set. Kept out of the installed libraries (it needs CLI11); linked by
+// the `fastslam` executable and its tests.
+//
+// Config files: one JSON object whose keys are the long flag names without the dashes
+// ("particles", "landmarks-csv", "no-progress", ...), values numbers, strings or booleans. A
+// flag given on the command line wins over the file; an unknown key, a nested value or a value
+// the flag's check refuses is an error naming the file and the key.
+//
+// Ownership: the App borrows the options it binds, which must outlive parsing.
+// Thread safety: thread-compatible. Costs: negligible.
+#pragma once
+
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "tools/cli/run_command.h"
+
+namespace fastslam::tools {
+
+// Options parsed as words (or with "given" semantics), turned into RunOptions by finish().
+struct RunWords {
+  int loops = 0;
+  double spacing = 0, scan_period = 0;  // given or not: RunOptions' optionals
+  std::string algorithm = "fastslam1";
+  std::string association = "known";
+  std::string resample = "neff";
+  std::string scheme = "systematic";
+  double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
+  double initial_heading_deg = 0;
+  double vp_min_bearing_deg = 0, vp_max_bearing_deg = 0;  // given or not: the gate's defaults
+  double vp_laser_yaw_deg = 0;
+  std::string config;  // --config FILE.json
+};
+
+// Binds the options of `fastslam run` (sources, world, filter, noise overrides, outputs).
+void add_run_options(CLI::App& cmd, RunOptions& options, RunWords& words);
+// Binds the options of `fastslam convert` (source, world, seed, --data, --out FILE.log).
+void add_convert_options(CLI::App& cmd, RunOptions& options, RunWords& words);
+
+// Applies the JSON config file to every option of `cmd` not given on its command line.
+// Throws std::runtime_error "<file>: ..." naming the key on an unknown key or a bad value.
+void apply_json_config(CLI::App& cmd, const std::string& path);
+
+// After parsing (and the config): the words into enums, the loops default, the noise overrides
+// that were given. Reads `cmd` to see which options were given.
+void finish_run_options(const CLI::App& cmd, const RunWords& words, RunOptions& options);
+
+}  // namespace fastslam::tools

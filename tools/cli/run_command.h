@@ -1,0 +1,110 @@
+// `fastslam run`: events from a source (tools/datasets/source.h: a simulated world, a native
+// log, Victoria Park, ...) driven through the Filter or the EKF-SLAM baseline by one loop,
+// scored against whatever truth the source holds (tools/eval/), with the metrics, trajectory
+// and map written to an output directory (tools/cli/run_output.h); and `fastslam convert`,
+// which writes any source as a native log.
+//
+// Ownership: plain options in; files out. Thread safety: one run per call; the filter runs its
+// own threads. Costs: the source's plus the filter's; memory O(steps) for the trajectory and
+// the truth.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "engine/filter_config.h"
+#include "tools/datasets/sim_source.h"
+#include "tools/datasets/source.h"
+#include "tools/datasets/victoria_park.h"
+#include "tools/sim/simulator.h"
+
+namespace fastslam::tools {
+
+// Defaults of the no-odometry models (--motion none, none-curvature): the per-control steps
+// of the random walks of v, omega and the curvature, about a car's acceleration and steering
+// rate (docs/victoria-park.md has how they were chosen).
+inline constexpr double kNoOdometrySigmaV = 0.15;      // m/s per step
+inline constexpr double kNoOdometrySigmaOmega = 0.05;  // rad/s per step
+inline constexpr double kNoOdometrySigmaKappa = 0.01;  // 1/m per step
+
+// Filter noises that replace the source's (a log header's, or the simulator's).
+struct NoiseOverrides {
+  std::optional<double> sigma_range, sigma_bearing, sigma_control0, sigma_control1;
+};
+
+struct RunOptions {
+  std::string source = "sim";  // a name in the registry (tools/datasets/source.h)
+  std::string data;            // a recorded source's file or directory
+  // --source sim: the world and the simulator (tools/datasets/sim_source.h SimWorldOptions).
+  std::string landmarks_csv;
+  std::string waypoints_csv;
+  std::string world = "grid";
+  std::uint64_t landmarks = kDefaultGridLandmarks;  // grid
+  std::optional<double> spacing;
+  std::optional<double> scan_period;
+  double loop_length = 2000.0;  // loop
+  SimConfig sim;
+  engine::FilterConfig filter;
+  // Unknown association: estimated landmarks are paired with true ones within this distance
+  // (tools/eval/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
+  double match_radius = 5.0;
+  NoiseOverrides noise;
+  // "odometry": the source's motion model with its controls; "none": the controls are ignored
+  // (only their dt is used) and the pose follows the Brownian velocity model of eq. 79-81
+  // (engine::MotionKind::kBrownian), with `no_odometry_sigma` (the per-control increments of v,
+  // m/s, and omega, rad/s; --sigma-u0/--sigma-u1 override them); "none-curvature": the same
+  // with the curvature walked instead of omega (engine::MotionKind::kBrownianCurvature: a car
+  // cannot turn while it stands), steps no_odometry_sigma[0] and `no_odometry_sigma_kappa`.
+  std::string motion = "odometry";
+  double no_odometry_sigma[2] = {kNoOdometrySigmaV, kNoOdometrySigmaOmega};
+  double no_odometry_sigma_kappa = kNoOdometrySigmaKappa;  // 1/m per control
+  // Replaces the source's start heading (rad) when set.
+  std::optional<double> initial_heading;
+  // --source victoria-park: the reader's options (gate, geometry, heading fit).
+  VictoriaParkOptions victoria_park;
+  std::string out;  // output directory; empty: metrics to stdout only
+  // Errors over time: a CSV row every `trace_every` scans (after the scan's update) with
+  // t, scan, pose_error_m (weighted-mean position against the latest truth pose, empty when the
+  // source has none within kMaxInterpolationGap), landmark_rmse_m (the best particle's map
+  // against the truth, by id under known association, else paired within match_radius; only
+  // landmarks seen so far; empty without true landmarks), landmarks (in the best map) and
+  // observed_landmarks (true landmarks seen so far). Empty: no trace, and no cost.
+  // Costs per row: an estimate (O(M + N), the best map copied out) and its scoring.
+  std::string trace;
+  std::uint64_t trace_every = 1;
+  bool progress = true;  // a progress bar on stderr when it is a terminal
+  // With `out`: the matplotlib script run as `/usr/bin/python3 SCRIPT OUT` after the files are
+  // written, to draw OUT/map.png (the command line sets tools/scripts/plot_run.py unless
+  // --no-plot). Empty: no picture. A failing script is reported on stderr and does not fail the
+  // run.
+  std::string plot_script;
+};
+
+// The plot script `fastslam run` uses by default: $FASTSLAM_PLOT_SCRIPT when set, else this
+// source tree's tools/scripts/plot_run.py.
+std::string default_plot_script();
+
+// The source's options: the world, the data, the seed; false alarms only under unknown
+// association.
+SourceOptions source_options(const RunOptions& options);
+
+// The filter's configuration for a source with header `h` under `options`: the header's
+// models and noises, the options' algorithm, particles, association, ... and noise overrides;
+// without odometry the Brownian model, and on Victoria Park the rear axle tracked with the
+// laser at (a, b) from it plus the header's own sensor offset (`tracked_point_offset`).
+engine::FilterConfig filter_config(const RunOptions& options, const LogHeader& h);
+// Where the source's pose is relative to the point the filter tracks: zero, except without
+// odometry on Victoria Park ((a, b), the laser from the rear axle).
+engine::SensorOffset tracked_point_offset(const RunOptions& options, const LogHeader& h);
+
+// `fastslam run` on any source; returns the process exit code. Throws std::exception with a
+// clear message on bad options or unreadable files.
+int run_simulation(const RunOptions& options);
+
+// `fastslam convert`: writes any source's events, header and true landmarks (a simulated
+// source passes its false alarms on) as a native log to the file `options.out`, which appears
+// only when complete.
+int convert_to_log(const RunOptions& options);
+
+}  // namespace fastslam::tools

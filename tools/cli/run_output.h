@@ -1,0 +1,62 @@
+// What `fastslam run` writes: the output directory's files (metrics.json, trajectory.csv and
+// .tum, landmarks.csv, and truth.csv, gps.csv, true_landmarks.csv when the source has them),
+// the `--trace` CSV of errors over time, and the map picture drawn by a plot script.
+//
+// Ownership: borrows its inputs for the call; TraceWriter owns its file.
+// Thread safety: thread-compatible. Costs: O(rows written); draw_map waits for the script.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <fstream>
+#include <optional>
+#include <span>
+#include <string>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "engine/filter.h"
+#include "tools/io/log_format.h"
+#include "tools/io/tum.h"
+
+namespace fastslam::tools {
+
+// `--trace`: one row every `every` scans, "t,scan,pose_error_m,landmark_rmse_m,landmarks,
+// observed_landmarks", an absent error left empty.
+class TraceWriter {
+ public:
+  // Throws std::runtime_error "--trace PATH: cannot open for writing".
+  TraceWriter(const std::string& path, std::uint64_t every);
+  // Counts a scan; true when this one gets a row.
+  bool due() { return scans_++ % every_ == 0; }
+  void row(double t, std::optional<double> pose_error, std::optional<double> map_error,
+           std::size_t landmarks, std::size_t observed);
+  // Throws std::runtime_error when the file could not be written.
+  void close();
+
+ private:
+  std::string path_;
+  std::uint64_t every_;
+  std::ofstream file_;
+  std::uint64_t scans_ = 0;
+};
+
+// Everything a run leaves in its output directory.
+struct RunFiles {
+  const nlohmann::json* metrics = nullptr;
+  std::span<const StampedPose> trajectory;  // the poses after the controls
+  std::span<const StampedPose> truth;
+  std::span<const StampedPose> gps;
+  std::span<const engine::MapLandmark> map;
+  std::span<const TruthLandmark> true_landmarks;
+};
+
+// Creates `dir` and writes the files (those of empty spans left out); prints the list.
+// Throws std::runtime_error naming a file that cannot be written.
+void write_run_files(const std::string& dir, const RunFiles& files);
+
+// Runs `/usr/bin/python3 SCRIPT DIR`. The run's results stand whatever it does, so a failure
+// is a warning on stderr naming the command and its exit status.
+void draw_map(const std::string& script, const std::string& dir);
+
+}  // namespace fastslam::tools

@@ -1,0 +1,32 @@
+#include "tools/datasets/log_source.h"
+
+#include <memory>
+#include <stdexcept>
+#include <utility>
+
+namespace fastslam::tools {
+
+LogSource::LogSource(Log log, std::string name, std::string summary) : log_(std::move(log)) {
+  info_.header = log_.header;
+  info_.landmarks = log_.landmarks;
+  for (const Event& e : log_.events) info_.expected_controls += e.kind == EventKind::kControl;
+  info_.name = std::move(name);
+  info_.summary = std::move(summary);
+}
+
+bool LogSource::next(Event& e, std::vector<engine::Observation>& scan) {
+  if (i_ == log_.events.size()) return false;
+  e = log_.events[i_++];
+  if (e.kind == EventKind::kScan) {
+    const auto first = log_.observations.begin() + static_cast<std::ptrdiff_t>(e.first);
+    scan.assign(first, first + e.count);
+  }
+  return true;
+}
+
+std::unique_ptr<Source> open_log_source(const SourceOptions& o) {
+  if (o.data.empty()) throw std::invalid_argument("--source log needs --data FILE.log");
+  return std::make_unique<LogSource>(read_log(o.data), o.data);
+}
+
+}  // namespace fastslam::tools

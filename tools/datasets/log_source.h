@@ -1,0 +1,29 @@
+// A source over a log held in memory: `--source log` reads a native log file
+// (docs/log-format.md) into one, and readers that convert a data set whole (Victoria Park) use
+// it for their events.
+//
+// Ownership: owns the log. Thread safety: thread-compatible. Costs: `next` copies a scan's
+// observations; the log is held whole (tools/io/log_format.h).
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "tools/datasets/source.h"
+#include "tools/io/log_format.h"
+
+namespace fastslam::tools {
+
+class LogSource final : public Source {
+ public:
+  // `name` is the info's name (the file or directory read); `summary` the line convert prints.
+  LogSource(Log log, std::string name, std::string summary = {});
+  bool next(Event& event, std::vector<engine::Observation>& scan) override;
+
+ private:
+  Log log_;
+  std::size_t i_ = 0;
+};
+
+}  // namespace fastslam::tools

@@ -1,0 +1,81 @@
+// Where `fastslam run` and `fastslam convert` get their events. A `Source` streams controls,
+// scans, truth poses and GPS fixes in time order and says up front what it knows: the log
+// header (models, noises, start pose), the true landmarks, the controls to expect. Sources are
+// found by name in one registry (`sources()`, source.cc), so the command line lists and opens
+// them without knowing which exist: a new data set is a file defining its factory plus its line
+// in the registry.
+//
+// Ownership: a Source owns the data its events come from. Thread safety: thread-compatible.
+// Costs: `next` is O(observations of the event); opening costs what reading the data costs.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "engine/filter.h"
+#include "tools/datasets/sim_source.h"
+#include "tools/datasets/victoria_park.h"
+#include "tools/io/log_format.h"
+
+namespace fastslam::tools {
+
+// What the factories may use; each source reads the fields that concern it.
+struct SourceOptions {
+  std::string data;        // a recorded source's file or directory
+  std::uint64_t seed = 1;  // simulated sources
+  bool clutter = true;     // simulated false alarms passed on (id -1)
+  SimWorldOptions sim;
+  VictoriaParkOptions victoria_park;
+};
+
+// Filter settings a data set recommends beyond its header's models; the command line applies
+// each one set here unless the user gave that option.
+struct FilterDefaults {
+  std::optional<double> existence_range_margin;  // m
+  std::optional<double> existence_missed;        // log-odds
+  // FastSLAM 2.0 only: the sensor noises, replacing the header's.
+  std::optional<double> fastslam2_sigma_range;    // m
+  std::optional<double> fastslam2_sigma_bearing;  // rad
+};
+
+// What a source knows before its first event.
+struct SourceInfo {
+  LogHeader header;
+  std::vector<TruthLandmark> landmarks;  // empty when the source has no true map
+  double expected_controls = 0.0;        // for the progress bar; 0: unknown
+  std::string name;                      // "world" in metrics.json
+  bool simulated = false;                // its time is the simulator's, not reading's
+  std::vector<std::pair<std::string, double>> metrics;  // added to metrics.json as they are
+  std::string summary;                                  // a line `convert` prints; may be empty
+};
+
+class Source {
+ public:
+  virtual ~Source() = default;
+  // The next event in time order, a scan's observations in `scan`; false at the end.
+  virtual bool next(Event& event, std::vector<engine::Observation>& scan) = 0;
+  const SourceInfo& info() const noexcept { return info_; }
+
+ protected:
+  SourceInfo info_;
+};
+
+struct SourceEntry {
+  std::string_view name;  // --source NAME
+  std::unique_ptr<Source> (*open)(const SourceOptions& options);
+  FilterDefaults defaults;
+};
+
+// Every source, in the order the command line lists them.
+std::span<const SourceEntry> sources();
+// Throws std::invalid_argument naming the known sources when `name` is none of them.
+const SourceEntry& find_source(std::string_view name);
+std::vector<std::string> source_names();
+
+}  // namespace fastslam::tools

@@ -1,0 +1,79 @@
+#include "tools/io/csv.h"
+
+#include <charconv>
+#include <cmath>
+#include <stdexcept>
+#include <string_view>
+#include <utility>
+
+namespace fastslam::tools {
+namespace {
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r'))
+    s.remove_suffix(1);
+  return s;
+}
+
+std::vector<std::string_view> split(std::string_view line) {
+  std::vector<std::string_view> fields;
+  std::size_t start = 0;
+  for (;;) {
+    const std::size_t comma = line.find(',', start);
+    fields.push_back(trim(line.substr(start, comma - start)));
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
+  }
+  return fields;
+}
+
+}  // namespace
+
+CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
+    : path_(std::move(path)), columns_(std::move(columns)), in_(path_) {
+  if (!in_) throw std::runtime_error(path_ + ": cannot open for reading");
+  if (!std::getline(in_, text_)) fail("empty file, expected a header line");
+  line_ = 1;
+  const std::vector<std::string_view> header = split(text_);
+  bool same = header.size() == columns_.size();
+  for (std::size_t i = 0; same && i < header.size(); ++i) same = header[i] == columns_[i];
+  if (!same) {
+    std::string expected;
+    for (const std::string& c : columns_) expected += (expected.empty() ? "" : ",") + c;
+    fail("header is '" + std::string(trim(text_)) + "', expected '" + expected + "'");
+  }
+}
+
+bool CsvReader::next(std::span<double> out) {
+  while (std::getline(in_, text_)) {
+    ++line_;
+    if (trim(text_).empty()) continue;
+    const std::vector<std::string_view> fields = split(text_);
+    if (fields.size() != columns_.size()) {
+      fail("expected " + std::to_string(columns_.size()) + " columns, found " +
+           std::to_string(fields.size()));
+    }
+    for (std::size_t i = 0; i < fields.size(); ++i) {
+      const std::string_view f = fields[i];
+      double value = 0.0;
+      const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
+      if (f.empty() || ec != std::errc() || end != f.data() + f.size()) {
+        fail("column '" + columns_[i] + "': '" + std::string(f) + "' is not a number");
+      }
+      if (!std::isfinite(value)) {
+        fail("column '" + columns_[i] + "': value '" + std::string(f) + "' is not finite");
+      }
+      out[i] = value;
+    }
+    return true;
+  }
+  if (in_.bad()) fail("read error");
+  return false;
+}
+
+void CsvReader::fail(const std::string& what) const {
+  throw std::runtime_error(path_ + ":" + std::to_string(line_) + ": " + what);
+}
+
+}  // namespace fastslam::tools

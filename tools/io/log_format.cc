@@ -1,0 +1,487 @@
+#include "tools/io/log_format.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <istream>
+#include <numbers>
+#include <ostream>
+#include <sstream>
+#include <stdexcept>
+#include <string_view>
+#include <unordered_set>
+
+namespace fastslam::tools {
+namespace {
+
+using engine::MotionKind;
+
+constexpr std::string_view kMagic = "fastslam-log";
+
+bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+
+// Splits on spaces and tabs; a trailing '\r' is ignored.
+void tokenize(std::string_view line, std::vector<std::string_view>& out) {
+  out.clear();
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t' || line[i] == '\r')) ++i;
+    const std::size_t start = i;
+    while (i < line.size() && line[i] != ' ' && line[i] != '\t' && line[i] != '\r') ++i;
+    if (i > start) out.push_back(line.substr(start, i - start));
+  }
+}
+
+class Parser {
+ public:
+  Parser(std::istream& in, const std::string& name) : in_(in), name_(name) {}
+
+  Log parse() {
+    Log log;
+    read_header(log.header);
+    std::unordered_set<std::uint64_t> landmark_ids;
+    double last_time = log.header.start_time;
+    while (next_line()) {
+      const std::string_view record = tokens_[0];
+      if (record == "landmark") {
+        fields(4, "landmark ID X Y");
+        TruthLandmark l{integer(1, "landmark id"), number(2, "x"), number(3, "y")};
+        if (!landmark_ids.insert(l.id).second) {
+          fail("landmark id " + std::to_string(l.id) + " is repeated");
+        }
+        log.landmarks.push_back(l);
+        continue;
+      }
+      Event e;
+      if (record == "control") {
+        fields(5, "control T DT U0 U1");
+        e.kind = EventKind::kControl;
+        e.dt = number(2, "dt");
+        if (e.dt < 0) fail("dt is negative (" + std::string(tokens_[2]) + ")");
+        e.control = {number(3, "u0"), number(4, "u1")};
+      } else if (record == "scan") {
+        if (tokens_.size() < 3) fail("scan needs 'scan T N' and N (range bearing id) triples");
+        const std::uint64_t n = integer(2, "observation count");
+        if (n > (tokens_.size() - 3) / 3 || tokens_.size() != 3 + 3 * n) {
+          fail("scan of " + std::to_string(n) + " observations needs " + std::to_string(3 + 3 * n) +
+               " fields, found " + std::to_string(tokens_.size()));
+        }
+        e.kind = EventKind::kScan;
+        e.first = log.observations.size();
+        e.count = static_cast<std::uint32_t>(n);
+        for (std::uint64_t k = 0; k < n; ++k) {
+          const std::size_t f = 3 + 3 * k;
+          engine::Observation z;
+          z.range = number(f, "range");
+          if (!(z.range > 0)) fail("range must be > 0 (got " + std::string(tokens_[f]) + ")");
+          z.bearing = number(f + 1, "bearing");
+          z.id = tokens_[f + 2] == "-" ? -1 : static_cast<std::int64_t>(integer(f + 2, "id"));
+          log.observations.push_back(z);
+        }
+      } else if (record == "pose") {
+        fields(5, "pose T X Y THETA");
+        e.kind = EventKind::kTruthPose;
+        e.x = number(2, "x");
+        e.y = number(3, "y");
+        e.theta = number(4, "theta");
+      } else if (record == "gps") {
+        fields(4, "gps T X Y");
+        e.kind = EventKind::kGps;
+        e.x = number(2, "x");
+        e.y = number(3, "y");
+      } else {
+        fail("unknown record '" + std::string(record) + "' (control, scan, pose, gps or landmark)");
+      }
+      e.time = number(1, "time");
+      if (e.time < last_time) {
+        fail("time goes backwards: " + std::string(tokens_[1]) + " after " + format(last_time));
+      }
+      last_time = e.time;
+      log.events.push_back(e);
+    }
+    if (in_.bad()) fail("read error");
+    return log;
+  }
+
+ private:
+  void read_header(LogHeader& h) {
+    if (!next_line()) fail("empty file, expected 'fastslam-log 1'");
+    if (tokens_[0] != kMagic) fail("not a fastslam log: expected 'fastslam-log 1' first");
+    fields(2, "fastslam-log VERSION");
+    if (integer(1, "version") != static_cast<std::uint64_t>(kLogFormatVersion)) {
+      fail("unsupported version " + std::string(tokens_[1]) + " (this reader reads 1)");
+    }
+    bool motion = false, noise = false, sensor = false, start = false;
+    auto once = [&](bool& seen) {
+      if (seen) fail("header line '" + std::string(tokens_[0]) + "' is repeated");
+      seen = true;
+    };
+    for (;;) {
+      if (!next_line()) fail("end of file inside the header (no 'end_header')");
+      const std::string_view key = tokens_[0];
+      if (key == "end_header") {
+        fields(1, "end_header");
+        break;
+      }
+      if (key == "motion") {
+        once(motion);
+        if (tokens_.size() < 2) fail("motion needs a kind");
+        const std::string_view kind = tokens_[1];
+        if (kind == "bailey-car") {
+          fields(3, "motion bailey-car WHEELBASE");
+          h.motion.kind = MotionKind::kBaileyCar;
+          h.motion.wheelbase = positive(2, "wheelbase");
+        } else if (kind == "victoria-park") {
+          fields(6, "motion victoria-park A B L H");
+          h.motion.kind = MotionKind::kVictoriaPark;
+          h.motion.geometry = {number(2, "a"), number(3, "b"), positive(4, "l"),
+                               non_negative(5, "h")};
+        } else if (kind == "unicycle") {
+          fields(2, "motion unicycle");
+          h.motion.kind = MotionKind::kUnicycle;
+        } else if (kind == "none") {
+          fields(2, "motion none");
+          h.motion.kind = MotionKind::kBrownian;
+        } else if (kind == "none-curvature") {
+          fields(2, "motion none-curvature");
+          h.motion.kind = MotionKind::kBrownianCurvature;
+        } else {
+          fail("unknown motion kind '" + std::string(kind) +
+               "' (bailey-car, victoria-park, unicycle, none or none-curvature)");
+        }
+      } else if (key == "control_noise") {
+        once(noise);
+        fields(3, "control_noise SIGMA0 SIGMA1");
+        h.motion.sigma_control[0] = non_negative(1, "sigma0");
+        h.motion.sigma_control[1] = non_negative(2, "sigma1");
+      } else if (key == "sensor") {
+        once(sensor);
+        fields(8,
+               "sensor SIGMA_RANGE SIGMA_BEARING MAX_RANGE FIELD_OF_VIEW OFFSET_X OFFSET_Y "
+               "OFFSET_YAW");
+        h.sensor.sigma_range = positive(1, "sigma_range");
+        h.sensor.sigma_bearing = positive(2, "sigma_bearing");
+        h.sensor.max_range = positive(3, "max_range");
+        h.sensor.field_of_view = positive(4, "field_of_view");
+        if (h.sensor.field_of_view > 2 * std::numbers::pi + 1e-12) {
+          fail("field_of_view must be at most 2 pi");
+        }
+        h.sensor.offset = {number(5, "offset_x"), number(6, "offset_y"), number(7, "offset_yaw")};
+      } else if (key == "start") {
+        once(start);
+        fields(5, "start T X Y THETA");
+        h.start_time = number(1, "time");
+        for (int k = 0; k < 3; ++k) h.start_pose[k] = number(2 + k, "pose");
+      } else {
+        fail("unknown header line '" + std::string(key) +
+             "' (motion, control_noise, sensor, start or end_header)");
+      }
+    }
+    if (!motion) fail("header has no 'motion' line");
+    if (!noise) fail("header has no 'control_noise' line");
+    if (!sensor) fail("header has no 'sensor' line");
+    if (!start) fail("header has no 'start' line");
+  }
+
+  // Next line with content (blank lines and '#' comments skipped) into tokens_.
+  bool next_line() {
+    while (std::getline(in_, text_)) {
+      ++line_;
+      tokenize(text_, tokens_);
+      if (!tokens_.empty() && tokens_[0].front() != '#') return true;
+    }
+    return false;
+  }
+
+  void fields(std::size_t n, const char* form) {
+    if (tokens_.size() != n) {
+      std::string what = "'";
+      what += tokens_[0];
+      what += "' needs " + std::to_string(n) + " fields (";
+      what += form;
+      what += "), found " + std::to_string(tokens_.size());
+      fail(what);
+    }
+  }
+
+  double number(std::size_t i, const char* what) {
+    const std::string_view f = tokens_[i];
+    double value = 0.0;
+    const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
+    if (ec != std::errc() || end != f.data() + f.size()) {
+      fail(std::string(what) + ": '" + std::string(f) + "' is not a number");
+    }
+    if (!std::isfinite(value)) fail(std::string(what) + ": '" + std::string(f) + "' is not finite");
+    return value;
+  }
+  double positive(std::size_t i, const char* what) {
+    const double v = number(i, what);
+    if (!(v > 0)) fail(std::string(what) + " must be > 0 (got " + std::string(tokens_[i]) + ")");
+    return v;
+  }
+  double non_negative(std::size_t i, const char* what) {
+    const double v = number(i, what);
+    if (v < 0) fail(std::string(what) + " must be >= 0 (got " + std::string(tokens_[i]) + ")");
+    return v;
+  }
+  std::uint64_t integer(std::size_t i, const char* what) {
+    const std::string_view f = tokens_[i];
+    std::uint64_t value = 0;
+    const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
+    if (ec != std::errc() || end != f.data() + f.size() ||
+        value > static_cast<std::uint64_t>(INT64_MAX)) {
+      fail(std::string(what) + ": '" + std::string(f) + "' is not a non-negative integer");
+    }
+    return value;
+  }
+
+  static std::string format(double v) {
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof(buf), v);
+    return std::string(buf, r.ptr);
+  }
+
+  [[noreturn]] void fail(const std::string& what) const {
+    throw std::runtime_error(name_ + ":" + std::to_string(line_) + ": " + what);
+  }
+
+  std::istream& in_;
+  const std::string& name_;
+  std::string text_;
+  std::vector<std::string_view> tokens_;
+  std::size_t line_ = 0;
+};
+
+void require_finite(double v, const char* what) {
+  if (!std::isfinite(v)) {
+    throw std::invalid_argument(std::string("LogWriter: ") + what + " is not finite");
+  }
+}
+
+}  // namespace
+
+bool operator==(const LogHeader& a, const LogHeader& b) {
+  const engine::MotionConfig& m = a.motion;
+  const engine::MotionConfig& n = b.motion;
+  const engine::SensorConfig& s = a.sensor;
+  const engine::SensorConfig& t = b.sensor;
+  // Only the parameters of the header's motion kind are part of a log.
+  const bool car = m.kind != MotionKind::kBaileyCar || same_bits(m.wheelbase, n.wheelbase);
+  const bool vp = m.kind != MotionKind::kVictoriaPark ||
+                  (same_bits(m.geometry.a, n.geometry.a) && same_bits(m.geometry.b, n.geometry.b) &&
+                   same_bits(m.geometry.l, n.geometry.l) && same_bits(m.geometry.h, n.geometry.h));
+  return m.kind == n.kind && car && vp && same_bits(m.sigma_control[0], n.sigma_control[0]) &&
+         same_bits(m.sigma_control[1], n.sigma_control[1]) &&
+         same_bits(s.sigma_range, t.sigma_range) && same_bits(s.sigma_bearing, t.sigma_bearing) &&
+         same_bits(s.max_range, t.max_range) && same_bits(s.field_of_view, t.field_of_view) &&
+         same_bits(s.offset.x, t.offset.x) && same_bits(s.offset.y, t.offset.y) &&
+         same_bits(s.offset.yaw, t.offset.yaw) && same_bits(a.start_time, b.start_time) &&
+         same_bits(a.start_pose[0], b.start_pose[0]) &&
+         same_bits(a.start_pose[1], b.start_pose[1]) && same_bits(a.start_pose[2], b.start_pose[2]);
+}
+
+bool operator==(const Event& a, const Event& b) {
+  return a.kind == b.kind && same_bits(a.time, b.time) && same_bits(a.dt, b.dt) &&
+         same_bits(a.control.u0, b.control.u0) && same_bits(a.control.u1, b.control.u1) &&
+         same_bits(a.x, b.x) && same_bits(a.y, b.y) && same_bits(a.theta, b.theta) &&
+         a.first == b.first && a.count == b.count;
+}
+
+bool operator==(const Log& a, const Log& b) {
+  if (!(a.header == b.header) || a.events != b.events || a.landmarks != b.landmarks ||
+      a.observations.size() != b.observations.size()) {
+    return false;
+  }
+  for (std::size_t i = 0; i < a.observations.size(); ++i) {
+    const engine::Observation& p = a.observations[i];
+    const engine::Observation& q = b.observations[i];
+    if (!same_bits(p.range, q.range) || !same_bits(p.bearing, q.bearing) || p.id != q.id) {
+      return false;
+    }
+  }
+  return true;
+}
+
+Log read_log(std::istream& in, const std::string& name) { return Parser(in, name).parse(); }
+
+Log read_log(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open for reading");
+  return read_log(in, path);
+}
+
+// ---- writing ----
+
+namespace {
+
+void put(std::string& line, double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof(buf), v);  // shortest exact form
+  line += ' ';
+  line.append(buf, r.ptr);
+}
+
+void put(std::string& line, std::uint64_t v) {
+  char buf[24];
+  const auto r = std::to_chars(buf, buf + sizeof(buf), v);
+  line += ' ';
+  line.append(buf, r.ptr);
+}
+
+}  // namespace
+
+LogWriter::LogWriter(std::ostream& out, const LogHeader& h) : out_(out), last_time_(h.start_time) {
+  const engine::MotionConfig& m = h.motion;
+  const engine::SensorConfig& s = h.sensor;
+  for (double v : {m.wheelbase, m.geometry.a, m.geometry.b, m.geometry.l, m.geometry.h,
+                   m.sigma_control[0], m.sigma_control[1], s.sigma_range, s.sigma_bearing,
+                   s.max_range, s.field_of_view, s.offset.x, s.offset.y, s.offset.yaw, h.start_time,
+                   h.start_pose[0], h.start_pose[1], h.start_pose[2]}) {
+    require_finite(v, "a header value");
+  }
+  std::string& l = line_;
+  l = "fastslam-log 1\n# docs/log-format.md\nmotion ";
+  l += engine::to_string(m.kind);
+  switch (m.kind) {
+    case MotionKind::kBaileyCar:
+      put(l, m.wheelbase);
+      break;
+    case MotionKind::kVictoriaPark:
+      for (double v : {m.geometry.a, m.geometry.b, m.geometry.l, m.geometry.h}) put(l, v);
+      break;
+    case MotionKind::kUnicycle:
+    case MotionKind::kBrownian:
+    case MotionKind::kBrownianCurvature:
+      break;
+    default:
+      throw std::invalid_argument("LogWriter: unknown motion kind");
+  }
+  l += "\ncontrol_noise";
+  put(l, m.sigma_control[0]);
+  put(l, m.sigma_control[1]);
+  l += "\n# sensor SIGMA_RANGE SIGMA_BEARING MAX_RANGE FIELD_OF_VIEW OFFSET_X OFFSET_Y OFFSET_YAW"
+       "\nsensor";
+  for (double v : {s.sigma_range, s.sigma_bearing, s.max_range, s.field_of_view, s.offset.x,
+                   s.offset.y, s.offset.yaw}) {
+    put(l, v);
+  }
+  l += "\n# start T X Y THETA\nstart";
+  put(l, h.start_time);
+  for (double v : h.start_pose) put(l, v);
+  l += "\nend_header\n";
+  out_ << l;
+}
+
+void LogWriter::stamp(double time) {
+  require_finite(time, "time");
+  if (time < last_time_) throw std::invalid_argument("LogWriter: time goes backwards");
+  last_time_ = time;
+}
+
+void LogWriter::landmark(const TruthLandmark& m) {
+  require_finite(m.x, "landmark x");
+  require_finite(m.y, "landmark y");
+  line_ = "landmark";
+  put(line_, m.id);
+  put(line_, m.x);
+  put(line_, m.y);
+  line_ += '\n';
+  out_ << line_;
+}
+
+void LogWriter::control(double time, double dt, const engine::Control& u) {
+  require_finite(dt, "dt");
+  require_finite(u.u0, "control");
+  require_finite(u.u1, "control");
+  if (dt < 0) throw std::invalid_argument("LogWriter: dt is negative");
+  stamp(time);
+  line_ = "control";
+  for (double v : {time, dt, u.u0, u.u1}) put(line_, v);
+  line_ += '\n';
+  out_ << line_;
+}
+
+void LogWriter::scan(double time, std::span<const engine::Observation> zs) {
+  for (const engine::Observation& z : zs) {
+    require_finite(z.range, "range");
+    require_finite(z.bearing, "bearing");
+    if (!(z.range > 0)) throw std::invalid_argument("LogWriter: range must be > 0");
+    if (z.id < -1) throw std::invalid_argument("LogWriter: id must be >= 0 or -1 (none)");
+  }
+  stamp(time);
+  line_ = "scan";
+  put(line_, time);
+  put(line_, static_cast<std::uint64_t>(zs.size()));
+  for (const engine::Observation& z : zs) {
+    put(line_, z.range);
+    put(line_, z.bearing);
+    if (z.id < 0) {
+      line_ += " -";
+    } else {
+      put(line_, static_cast<std::uint64_t>(z.id));
+    }
+  }
+  line_ += '\n';
+  out_ << line_;
+}
+
+void LogWriter::truth_pose(double time, double x, double y, double theta) {
+  for (double v : {x, y, theta}) require_finite(v, "pose");
+  stamp(time);
+  line_ = "pose";
+  for (double v : {time, x, y, theta}) put(line_, v);
+  line_ += '\n';
+  out_ << line_;
+}
+
+void LogWriter::gps(double time, double x, double y) {
+  require_finite(x, "gps x");
+  require_finite(y, "gps y");
+  stamp(time);
+  line_ = "gps";
+  for (double v : {time, x, y}) put(line_, v);
+  line_ += '\n';
+  out_ << line_;
+}
+
+void LogWriter::event(const Log& log, const Event& e) {
+  switch (e.kind) {
+    case EventKind::kControl:
+      control(e.time, e.dt, e.control);
+      return;
+    case EventKind::kScan: {
+      if (e.first > log.observations.size() || e.count > log.observations.size() - e.first) {
+        throw std::invalid_argument("LogWriter: a scan's observations are out of bounds");
+      }
+      scan(e.time,
+           std::span<const engine::Observation>(log.observations).subspan(e.first, e.count));
+      return;
+    }
+    case EventKind::kTruthPose:
+      truth_pose(e.time, e.x, e.y, e.theta);
+      return;
+    case EventKind::kGps:
+      gps(e.time, e.x, e.y);
+      return;
+  }
+  throw std::invalid_argument("LogWriter: unknown event kind");
+}
+
+void write_log(std::ostream& out, const Log& log) {
+  LogWriter writer(out, log.header);
+  for (const TruthLandmark& m : log.landmarks) writer.landmark(m);
+  for (const Event& e : log.events) writer.event(log, e);
+}
+
+void write_log(const std::string& path, const Log& log) {
+  // Format into memory first so a log that would not read back leaves no file behind.
+  std::ostringstream text;
+  write_log(text, log);
+  std::ofstream out(path);
+  if (!out) throw std::runtime_error(path + ": cannot open for writing");
+  out << text.view();
+  if (!out) throw std::runtime_error(path + ": write failed");
+}
+
+}  // namespace fastslam::tools

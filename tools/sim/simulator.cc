@@ -1,0 +1,152 @@
+#include "tools/sim/simulator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "parallel/random_stream.h"
+
+namespace fastslam::tools {
+namespace {
+
+double wrap(double angle) {
+  angle = std::remainder(angle, 2 * std::numbers::pi);
+  return angle <= -std::numbers::pi ? angle + 2 * std::numbers::pi : angle;
+}
+
+// Streams of one control step: control noise and observation noise never share draws.
+constexpr std::uint32_t kControlStream = 0;
+constexpr std::uint32_t kSensorStream = 1;
+constexpr std::uint32_t kClutterStream = 2;
+
+}  // namespace
+
+Simulator::Simulator(const World& world, const SimConfig& config, std::uint64_t seed)
+    : world_(&world),
+      config_(config),
+      seed_(seed),
+      index_(world.landmarks),
+      pose_{world.start_x, world.start_y, world.start_theta},
+      loops_left_(config.loops) {
+  if (world.waypoints.empty()) throw std::invalid_argument("simulator: the world has no waypoints");
+  if (!(config.dt > 0) || !(config.speed > 0) || !(config.wheelbase > 0) ||
+      !(config.max_range > 0) || !(config.dt_observe > 0) || !(config.field_of_view > 0) ||
+      !(config.min_range > 0) || !(config.min_range < config.max_range)) {
+    throw std::invalid_argument(
+        "simulator: dt, speed, wheelbase, max range, field of view and observation period must "
+        "be positive, and 0 < min range < max range");
+  }
+  if (config.sigma_v < 0 || config.sigma_steer < 0 || config.sigma_range < 0 ||
+      config.sigma_bearing < 0) {
+    throw std::invalid_argument("simulator: noise standard deviations must not be negative");
+  }
+  if (config.loops < 1) throw std::invalid_argument("simulator: loops must be at least 1");
+  if (!(config.clutter_rate >= 0) || !(config.clutter_rate <= 1000)) {
+    throw std::invalid_argument("simulator: clutter_rate must be in [0, 1000] per scan");
+  }
+}
+
+bool Simulator::next(SimStep& step) {
+  if (done_) return false;
+  // compute_steering.m: switch waypoints within at_waypoint; past the last one, start the next
+  // loop or finish (the finishing step still drives and observes, as in the original).
+  const Point* target = &world_->waypoints[waypoint_];
+  const double d2 =
+      (target->x - pose_.x) * (target->x - pose_.x) + (target->y - pose_.y) * (target->y - pose_.y);
+  bool steer_update = true;
+  if (d2 < config_.at_waypoint * config_.at_waypoint) {
+    ++waypoint_;
+    if (waypoint_ == world_->waypoints.size()) {
+      steer_update = false;
+      waypoint_ = 0;
+      if (--loops_left_ == 0) done_ = true;
+    } else {
+      target = &world_->waypoints[waypoint_];
+    }
+  }
+  if (steer_update) {
+    double delta =
+        wrap(std::atan2(target->y - pose_.y, target->x - pose_.x) - pose_.theta - steer_);
+    const double max_delta = config_.steer_rate * config_.dt;
+    if (std::abs(delta) > max_delta) delta = std::copysign(max_delta, delta);
+    steer_ += delta;
+    if (std::abs(steer_) > config_.max_steer) steer_ = std::copysign(config_.max_steer, steer_);
+  }
+  // vehicle_model.m
+  const double v = config_.speed;
+  pose_.x += v * config_.dt * std::cos(steer_ + pose_.theta);
+  pose_.y += v * config_.dt * std::sin(steer_ + pose_.theta);
+  pose_.theta = wrap(pose_.theta + v * config_.dt * std::sin(steer_) / config_.wheelbase);
+
+  parallel::RandomStream noise({seed_, step_, kControlStream, parallel::Purpose::kSimulator});
+  const double nv = noise.normal();
+  const double ng = noise.normal();
+  step.index = step_;
+  step.dt = config_.dt;
+  step.speed = v + (config_.control_noise ? nv * config_.sigma_v : 0.0);
+  step.steer = steer_ + (config_.control_noise ? ng * config_.sigma_steer : 0.0);
+  step.truth = pose_;
+
+  // fastslam1_sim.m accumulates dt and observes once the sum reaches DT_OBSERVE; with dt = 0.025
+  // the floating-point sum of eight steps falls just short of 0.2, so it observes every ninth
+  // step. Reproduced on purpose: it is what the reference results were computed with.
+  since_scan_ += config_.dt;
+  step.has_scan = since_scan_ >= config_.dt_observe;
+  step.scan.clear();
+  if (step.has_scan) {
+    since_scan_ = 0.0;
+    observe(step);
+  }
+  ++step_;
+  return true;
+}
+
+void Simulator::observe(SimStep& step) {
+  index_.within(pose_.x, pose_.y, config_.max_range, visible_);
+  parallel::RandomStream noise({seed_, step_, kSensorStream, parallel::Purpose::kSimulator});
+  const double half_fov = config_.field_of_view / 2;
+  for (const std::uint32_t i : visible_) {
+    const Point& landmark = world_->landmarks[i];
+    const double dx = landmark.x - pose_.x;
+    const double dy = landmark.y - pose_.y;
+    const double bearing = wrap(std::atan2(dy, dx) - pose_.theta);
+    // get_visible_landmarks.m keeps the half plane ahead (dx cos + dy sin > 0), i.e. |bearing|
+    // < pi/2; a field of view generalises it.
+    if (!(std::abs(bearing) < half_fov)) continue;
+    const double range = std::sqrt(dx * dx + dy * dy);
+    if (range < config_.min_range) continue;
+    const double nr = noise.normal();
+    const double nb = noise.normal();
+    SimObservation z;
+    z.landmark = i;
+    // Clamped so that a sensor never reports a range below its minimum, whatever the noise.
+    z.range = std::max(config_.min_range,
+                       range + (config_.sensor_noise ? nr * config_.sigma_range : 0.0));
+    z.bearing = wrap(bearing + (config_.sensor_noise ? nb * config_.sigma_bearing : 0.0));
+    step.scan.push_back(z);
+  }
+  if (config_.clutter_rate > 0) {
+    // Poisson count by inversion, then points uniform in the annular sector's area.
+    parallel::RandomStream clutter({seed_, step_, kClutterStream, parallel::Purpose::kSimulator});
+    const double u = clutter.uniform();
+    int count = 0;
+    double p = std::exp(-config_.clutter_rate);
+    double cumulative = p;
+    while (u > cumulative && count < 10'000) {
+      ++count;
+      p *= config_.clutter_rate / count;
+      cumulative += p;
+    }
+    const double r0 = config_.min_range * config_.min_range;
+    const double r1 = config_.max_range * config_.max_range;
+    for (int k = 0; k < count; ++k) {
+      SimObservation z;
+      z.landmark = kClutter;
+      z.range = std::sqrt(r0 + clutter.uniform() * (r1 - r0));
+      z.bearing = wrap((clutter.uniform() - 0.5) * config_.field_of_view);
+      step.scan.push_back(z);
+    }
+  }
+}
+
+}  // namespace fastslam::tools
