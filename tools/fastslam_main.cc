@@ -4,9 +4,12 @@
 #include <cstdio>
 #include <exception>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
+#include "engine/enum_names.h"
+#include "engine/filter_config.h"
 #include "tools/command_line.h"
 #include "tools/lg_slam_experiment.h"
 #include "tools/memory_demo.h"
@@ -84,11 +87,15 @@ int main(int argc, char** argv) {
                    "largest N the linear engine accepts (it is O(M N) per update)")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
       ->capture_default_str();
+  std::vector<std::string> fastslam_versions =
+      fastslam::engine::enum_names<fastslam::engine::Algorithm>();
+  std::erase(fastslam_versions,
+             std::string(fastslam::engine::enum_name(fastslam::engine::Algorithm::kEkf)));
   scaling_cmd->add_option("--algorithm", scaling_algorithm, "fastslam1 or fastslam2")
-      ->check(CLI::IsMember({"fastslam1", "fastslam2"}))
+      ->check(CLI::IsMember(fastslam_versions))
       ->capture_default_str();
   scaling_cmd->add_option("--association", scaling_association, "known or ml or das")
-      ->check(CLI::IsMember({"known", "ml", "das"}))
+      ->check(CLI::IsMember(fastslam::engine::enum_names<fastslam::engine::Association>()))
       ->capture_default_str();
   scaling_cmd
       ->add_option("--threads", scaling.threads,
@@ -165,12 +172,8 @@ int main(int argc, char** argv) {
       using fastslam::engine::Association;
       scaling.engine = scaling_engine == "linear" ? fastslam::tools::ScalingEngine::kLinear
                                                   : fastslam::tools::ScalingEngine::kTree;
-      scaling.filter.algorithm =
-          scaling_algorithm == "fastslam2" ? Algorithm::kFastSlam2 : Algorithm::kFastSlam1;
-      scaling.filter.association = scaling_association == "known" ? Association::kKnown
-                                   : scaling_association == "das"
-                                       ? Association::kDataAssociationSampling
-                                       : Association::kMaximumLikelihood;
+      scaling.filter.algorithm = fastslam::engine::parse_enum<Algorithm>(scaling_algorithm);
+      scaling.filter.association = fastslam::engine::parse_enum<Association>(scaling_association);
       return fastslam::tools::run_scaling_command(scaling, scaling_json, scaling_csv);
     }
   } catch (const std::exception& e) {

@@ -1,8 +1,9 @@
 // The Victoria Park data set (../shared/data/victoria_park/README.md) read into a native `Log`
 // (tools/log_format.h): every odometry sample as a control, every laser scan (with its tree
-// detections, gated) as a scan, every GPS fix as a fix, in one time order; the Guivant-Nebot
-// car model with the laser offset in the header, and the initial pose from the first GPS fix
-// with a heading fitted to the GPS track (see `VictoriaParkOptions::heading_fit_seconds`).
+// detections, gated) as a scan, every GPS fix as a fix, in one time order; the Ackermann car
+// model (engine::AckermannModel) with this car's geometry in the header, and the initial pose from
+// the first GPS fix with a heading fitted to the GPS track (see
+// `VictoriaParkOptions::heading_fit_seconds`).
 //
 // Time conventions. Odometry sample k is held from its own time t_k to the next sample's
 // t_{k+1} (the data set's reference code integrates "over dt = time to next sample"); as every
@@ -35,6 +36,11 @@
 
 namespace fastslam::tools {
 
+// The Victoria Park car (../shared/data/victoria_park/README.md, Guivant and Nebot), metres:
+// the laser 3.78 m ahead of the rear axle and 0.50 m left of the centre line, wheelbase 2.83 m,
+// the encoder wheel 0.76 m left of the centre line.
+inline constexpr engine::AckermannGeometry kVictoriaParkGeometry{3.78, 0.50, 2.83, 0.76};
+
 // Which tree detections are kept. Defaults:
 // - range 5..70 m: the published FastSLAM configuration for this data set (README, RFS-SLAM
 //   `cfg/fastslam_VictoriaPark.xml`). Under 5 m a trunk spans many beams and is seen
@@ -56,7 +62,7 @@ struct VictoriaParkGate {
 
 struct VictoriaParkOptions {
   VictoriaParkGate gate;
-  engine::VictoriaParkGeometry geometry;  // a = 3.78, b = 0.5, L = 2.83, H = 0.76 (README)
+  engine::AckermannGeometry geometry = kVictoriaParkGeometry;
   // Noises written into the header (the filter's defaults for this source; flags override).
   // Chosen by a sweep on this data (FS1, M = 100, ML; session 2): GPS RMSE 11.4 m with table 1's
   // negative information, 6.7 m without it. The published RFS-SLAM variances the README quotes
