@@ -1,10 +1,6 @@
 // Angle wrapping: every heading and bearing the engine stores or compares lives in (-pi, pi].
-//
-// `wrap_angle` is exact (it returns a - 2*pi*k computed without rounding, for the double
-// constant kPi) and fast in the common case: an angle already in range returns after two
-// compares, one just outside (the sum or difference of two wrapped angles) after one exact
-// subtraction. Only angles beyond (-3 pi, 3 pi] (about) fall back to std::remainder (also exact).
-// Thread safety: pure functions. Cost: O(1), no allocation.
+// `wrap_angle` is exact (a - 2 pi k without rounding) and returns after two compares for an
+// angle in range, one exact subtraction just outside it. Pure functions; O(1), no allocation.
 #pragma once
 
 #include <cmath>

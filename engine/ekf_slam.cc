@@ -30,7 +30,7 @@ double seconds_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double>(b - a).count();
 }
 
-int pose_dim_of(MotionKind kind) { return without_odometry(kind) ? 5 : 3; }
+int pose_dim_of(MotionKind kind) { return motion_state_dim(kind); }
 
 constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
 
@@ -175,8 +175,7 @@ struct EkfSlam::Impl {
   }
 
   void predict(const Control& control, double dt) {
-    visit_motion(config.motion,
-                 [&](const auto& motion) { predict_with(motion, control, dt); });
+    visit_motion(config.motion, [&](const auto& motion) { predict_with(motion, control, dt); });
   }
 
   // The innovation covariance S of z against landmark `landmark` at the current state, its

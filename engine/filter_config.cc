@@ -31,34 +31,13 @@ void validate_ekf(const FilterConfig& c) {
 
 void validate(const FilterConfig& c) {
   require(c.particles >= 1, "particles must be at least 1 (got 0)");
-  require(c.algorithm == Algorithm::kFastSlam1 || c.algorithm == Algorithm::kFastSlam2 ||
-              c.algorithm == Algorithm::kEkf,
-          "unknown algorithm");
-  require(c.association == Association::kKnown ||
-              c.association == Association::kMaximumLikelihood ||
-              c.association == Association::kDataAssociationSampling,
-          "unknown association");
+  require(enum_known(c.algorithm), "unknown algorithm");
+  require(enum_known(c.association), "unknown association");
   if (c.algorithm == Algorithm::kEkf) validate_ekf(c);
-  const MotionConfig& m = c.motion;
-  for (int k = 0; k < 2; ++k) {
-    require(std::isfinite(m.sigma_control[k]) && m.sigma_control[k] >= 0,
-            "motion.sigma_control[" + std::to_string(k) + "] must be finite and >= 0");
-  }
-  switch (m.kind) {
-    case MotionKind::kBaileyCar:
-      require(positive(m.wheelbase), "motion.wheelbase must be finite and > 0");
-      break;
-    case MotionKind::kVictoriaPark:
-      require(positive(m.geometry.l) && std::isfinite(m.geometry.a) &&
-                  std::isfinite(m.geometry.b) && std::isfinite(m.geometry.h) && m.geometry.h >= 0,
-              "motion.geometry must be finite with l > 0 and h >= 0");
-      break;
-    case MotionKind::kUnicycle:
-    case MotionKind::kBrownian:
-    case MotionKind::kBrownianCurvature:
-      break;
-    default:
-      require(false, "unknown motion kind");
+  try {
+    validate(c.motion);
+  } catch (const std::invalid_argument& e) {
+    require(false, e.what());
   }
   const SensorConfig& s = c.sensor;
   require(positive(s.sigma_range), "sensor.sigma_range must be finite and > 0");
@@ -79,58 +58,13 @@ void validate(const FilterConfig& c) {
   require(std::isfinite(c.gating.search_scale) && c.gating.search_scale >= 1,
           "gating.search_scale must be finite and >= 1");
   parallel::validate(c.resample);
-  require(c.resample.when == parallel::ResamplePolicy::When::kEveryStep ||
-              c.resample.when == parallel::ResamplePolicy::When::kEssBelowFraction,
-          "resample.when is not a known policy");
-  require(c.resample.scheme == parallel::ResampleScheme::kSystematic ||
-              c.resample.scheme == parallel::ResampleScheme::kStratified ||
-              c.resample.scheme == parallel::ResampleScheme::kMultinomial,
-          "resample.scheme is not a known scheme");
+  require(enum_known(c.resample.when), "resample.when is not a known policy");
+  require(enum_known(c.resample.scheme), "resample.scheme is not a known scheme");
   require(c.grain >= 1, "grain must be at least 1");
   require(c.split_seconds >= 0, "split_seconds must be >= 0 (infinity: never split)");
   require(c.threads <= parallel::ParticleKernel::kMaxThreads,
           "threads must be at most " + std::to_string(parallel::ParticleKernel::kMaxThreads));
   for (double v : c.initial_pose) require(std::isfinite(v), "initial_pose must be finite");
-}
-
-std::string_view to_string(Algorithm algorithm) {
-  switch (algorithm) {
-    case Algorithm::kFastSlam1:
-      return "fastslam1";
-    case Algorithm::kFastSlam2:
-      return "fastslam2";
-    case Algorithm::kEkf:
-      return "ekf";
-  }
-  return "unknown";
-}
-
-std::string_view to_string(Association association) {
-  switch (association) {
-    case Association::kKnown:
-      return "known";
-    case Association::kMaximumLikelihood:
-      return "ml";
-    case Association::kDataAssociationSampling:
-      return "das";
-  }
-  return "unknown";
-}
-
-std::string_view to_string(MotionKind kind) {
-  switch (kind) {
-    case MotionKind::kBaileyCar:
-      return "bailey-car";
-    case MotionKind::kUnicycle:
-      return "unicycle";
-    case MotionKind::kVictoriaPark:
-      return "victoria-park";
-    case MotionKind::kBrownian:
-      return "none";
-    case MotionKind::kBrownianCurvature:
-      return "none-curvature";
-  }
-  return "unknown";
 }
 
 }  // namespace fastslam::engine

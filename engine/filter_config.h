@@ -1,19 +1,21 @@
 // Everything a `Filter` (or the EKF-SLAM baseline, engine/ekf_slam.h) is built from: the
 // algorithm, the particle count, the association mode, the motion and sensor models with their
-// noises, the existence (log-odds) parameters, the resampling policy, the EKF's gates, the seed
-// and the threads. One plain struct, validated once by `validate(config)`, which names the first
-// field that is wrong.
-//
-// Thread safety: value types. Costs: validation is O(1).
+// noises, the existence parameters, the resampling policy, the EKF's gates, the seed and the
+// threads; and the name table of each enum a configuration holds (engine/enum_names.h). One
+// plain struct, checked once by `validate(config)`, which names the first wrong field.
+// Thread safety: value types. Costs: validation is O(1); docs/engine-config.md has the
+// measurements behind the defaults.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <numbers>
 #include <string>
 #include <string_view>
 
+#include "engine/enum_names.h"
 #include "engine/measurement_model.h"
-#include "engine/motion_model.h"
+#include "engine/motion_dispatch.h"
 #include "parallel/resample.h"
 
 namespace fastslam::engine {
@@ -24,52 +26,65 @@ enum class Algorithm : std::uint8_t {
   kEkf,  // EKF-SLAM over the pose and every landmark: engine/ekf_slam.h, not `Filter`
 };
 enum class Association : std::uint8_t {
-  kKnown,  // observations carry the landmark id (simulations, ground-truth tests)
-  kMaximumLikelihood,          // eq. 64 (unknown association issue)
-  kDataAssociationSampling,    // eq. 65 (unknown association issue)
+  kKnown,                    // observations carry the landmark id (simulations, ground-truth tests)
+  kMaximumLikelihood,        // eq. 64 (unknown association issue)
+  kDataAssociationSampling,  // eq. 65 (unknown association issue)
 };
-enum class MotionKind : std::uint8_t {
-  kBaileyCar,     // control (V, G): speed and steering from the heading; Bailey's simulator
-  kUnicycle,      // control (v, omega)
-  kVictoriaPark,  // control (encoder speed, steering); the state is the laser's pose
-  kBrownian,      // no odometry (eq. 79-81): controls carry no information, only dt
-  // No odometry, speed and path curvature walked (engine/motion_model.h BrownianCurvatureModel:
-  // theta_dot = v kappa, the rear axle of a car); controls carry no information, only dt.
-  kBrownianCurvature,
+template <>
+struct EnumNames<Algorithm> {
+  static constexpr std::string_view kWhat = "algorithm";
+  static constexpr std::array<EnumName<Algorithm>, 3> kNames = {{
+      {Algorithm::kFastSlam1, "fastslam1"},
+      {Algorithm::kFastSlam2, "fastslam2"},
+      {Algorithm::kEkf, "ekf"},
+  }};
 };
 
-// Whether the model ignores the controls and carries its velocities in the state (x, y, theta,
-// v, omega or kappa): kBrownian and kBrownianCurvature.
-constexpr bool without_odometry(MotionKind kind) noexcept {
-  return kind == MotionKind::kBrownian || kind == MotionKind::kBrownianCurvature;
-}
+template <>
+struct EnumNames<Association> {
+  static constexpr std::string_view kWhat = "association";
+  static constexpr std::array<EnumName<Association>, 3> kNames = {{
+      {Association::kKnown, "known"},
+      {Association::kMaximumLikelihood, "ml"},
+      {Association::kDataAssociationSampling, "das"},
+  }};
+};
 
-struct MotionConfig {
-  MotionKind kind = MotionKind::kBaileyCar;
-  double wheelbase = 4.0;           // kBaileyCar
-  VictoriaParkGeometry geometry;    // kVictoriaPark
-  // Standard deviations of the control noise (per control component: speed m/s and steering
-  // rad for the cars, v and omega for the unicycle; for kBrownian the per-step increments of v
-  // and omega, eq. 80; for kBrownianCurvature those of v (m/s) and kappa (1/m)).
-  double sigma_control[2] = {0.3, 3.0 * std::numbers::pi / 180};
+template <>
+struct EnumNames<parallel::ResamplePolicy::When> {
+  static constexpr std::string_view kWhat = "resampling policy";
+  static constexpr std::array<EnumName<parallel::ResamplePolicy::When>, 2> kNames = {{
+      {parallel::ResamplePolicy::When::kEveryStep, "every"},
+      {parallel::ResamplePolicy::When::kEssBelowFraction, "neff"},
+  }};
+};
+
+template <>
+struct EnumNames<parallel::ResampleScheme> {
+  static constexpr std::string_view kWhat = "resampling scheme";
+  static constexpr std::array<EnumName<parallel::ResampleScheme>, 3> kNames = {{
+      {parallel::ResampleScheme::kSystematic, "systematic"},
+      {parallel::ResampleScheme::kStratified, "stratified"},
+      {parallel::ResampleScheme::kMultinomial, "multinomial"},
+  }};
 };
 
 struct SensorConfig {
-  double sigma_range = 0.1;                              // m
-  double sigma_bearing = 1.0 * std::numbers::pi / 180;   // rad
-  SensorOffset offset;                                   // sensor pose on the vehicle
-  double max_range = 30.0;                               // perceptual range (negative information)
-  double field_of_view = std::numbers::pi;               // rad, centred on the sensor's heading
+  double sigma_range = 0.1;                             // m
+  double sigma_bearing = 1.0 * std::numbers::pi / 180;  // rad
+  SensorOffset offset;                                  // sensor pose on the vehicle
+  double max_range = 30.0;                              // perceptual range (negative information)
+  double field_of_view = std::numbers::pi;              // rad, centred on the sensor's heading
 };
 
 // Existence log-odds and negative information (eq. 73-75), unknown association only (with known
 // ids every particle keeps every landmark); the defaults are table 1's counter form.
 struct ExistenceConfig {
   bool negative_information = true;  // false: landmarks are never missed, never removed
-  double initial = 1.0;       // log-odds of a new landmark
-  double seen = 1.0;          // l+ added when associated
-  double missed = 1.0;        // l- subtracted when in view and not associated
-  double remove_below = 0.0;  // removed when the log-odds fall below this
+  double initial = 1.0;              // log-odds of a new landmark
+  double seen = 1.0;                 // l+ added when associated
+  double missed = 1.0;               // l- subtracted when in view and not associated
+  double remove_below = 0.0;         // removed when the log-odds fall below this
   // A landmark counts as in view when its mean is within max_range - range_margin of the
   // sensor and inside the field of view: one at the edge is detected or not by where it truly
   // is, which its estimate does not know to better than its uncertainty.
@@ -80,9 +95,8 @@ struct ExistenceConfig {
 struct AssociationConfig {
   // A candidate is considered only when its squared Mahalanobis distance v^T Q^-1 v (FastSLAM
   // 2.0: v^T L^-1 v, eq. 60) is at most this: by default chi-square with 2 dof at 99.999%, wide
-  // enough that p0, not the gate, decides between a known landmark and a new one at the default
-  // noise and p0 (the gate bounds the search; a narrower one turns loop closures into new
-  // landmarks: on webmap, FS2 ML pose RMSE 9.1 m at 13.8, 7.6 m at 23 and above).
+  // enough that p0, not the gate, decides between a known landmark and a new one (the gate
+  // bounds the search; docs/engine-config.md).
   double gate = 23.025850929940457;
   // Candidates come from a disc query of the particle's spatial index around the landmark
   // position the observation implies; its radius is this factor times the radius the gate
@@ -116,18 +130,14 @@ struct FilterConfig {
   parallel::ResamplePolicy resample{parallel::ResamplePolicy::When::kEssBelowFraction, 0.75,
                                     parallel::ResampleScheme::kSystematic};
   std::uint64_t seed = 1;
-  unsigned threads = 0;      // 0: every core
-  // Particles per parallel task (a pass deals whole groups of 8 particles to about
-  // particles / grain tasks, see engine/filter.cc; up to `grain` particles run on the calling
-  // thread alone, unless the pass is heavy: see split_seconds). 128 amortises the per-block
-  // setup of the vectorised control loop (about 0.4 us; webmap FS1, M = 100, one thread:
-  // 37.5 ms at 16, 33.2 ms at 128), keeps filters too small to gain from a second thread
-  // inline, and gives each thread several tasks from M = 1000 up.
+  unsigned threads = 0;  // 0: every core
+  // Particles per parallel task: a pass deals whole groups of 8 particles to about
+  // particles / grain tasks; up to `grain` particles run on the calling thread alone, unless
+  // the pass is heavy (split_seconds). The default is measured: docs/engine-config.md.
   std::size_t grain = 128;
   // A pass (the controls since the last scan, and the scan) whose work took longer than this
-  // on the last pass is split into at least one block per thread, whatever the grain: Victoria
-  // Park's association (~0.5 ms a pass at M = 100) gains from a second thread, webmap's
-  // ~12 us passes lose to the dispatch. Decides only the split, never a result.
+  // on the last pass is split into at least one block per thread, whatever the grain
+  // (docs/engine-config.md). Decides only the split, never a result.
   double split_seconds = 100e-6;
   // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
   // store per particle per control and a reduction per control).
@@ -142,8 +152,9 @@ struct FilterConfig {
 // or non-finite noise, wheelbase or range, an association the build does not support, ...).
 void validate(const FilterConfig& config);
 
-std::string_view to_string(Algorithm algorithm);
-std::string_view to_string(Association association);
-std::string_view to_string(MotionKind kind);
+// The names of the tables above (metrics.json, log headers, the command line).
+constexpr std::string_view to_string(Algorithm algorithm) { return enum_name(algorithm); }
+constexpr std::string_view to_string(Association association) { return enum_name(association); }
+constexpr std::string_view to_string(MotionKind kind) { return enum_name(kind); }
 
 }  // namespace fastslam::engine

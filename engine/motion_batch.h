@@ -1,41 +1,12 @@
-// The motion models of engine/motion_model.h applied to a block of particles at once, over
-// structure-of-arrays columns, so that the compiler vectorises across particles (g++ -O3
-// -march=native: eight particles per AVX-512 instruction, four per AVX2 one). These are the
-// filter's control-loop kernels:
-//   sample_block(model, block, steps, sigmas, normals)  for each control step, every lane:
-//                                                      s <- sample(s, u, dt, sigmas, its two
-//                                                      normals)                 (FastSLAM 1.0)
-//   predict_block(model, block, steps, sigmas, cov)     for each control step, every lane:
-//                                                      P <- J P J^T + V M V^T at (s, u),
-//                                                      M = diag(sigmas^2), then
-//                                                      s <- predict(s, u, dt)   (FastSLAM 2.0)
-// A block is carried through all its steps in one call (the state stays in local arrays), which
-// is how the filter advances a particle block through every control queued before a scan.
-// Each equals the scalar model (`sample`, `predict`, `jacobian_pose`, `jacobian_control`,
-// `pose_noise`) up to rounding: the sines and cosines are parallel/internal/vmath.h's (absolute
-// error ~1e-16) instead of libm's, and the operations are grouped differently
-// (tests/engine/motion_batch_test.cc bounds the difference by 1e-12 of the state's scale for
-// every model). Headings are wrapped to (-pi, pi] exactly as wrap_angle does.
-//
-// Determinism: a lane's result is a function of that lane's inputs alone, whatever the block
-// size and the lane's position in it, so a filter run is bit-identical for any blocking and
-// thread count. Two things ensure it: lanes come in whole groups of kMotionLanes (the vector
-// loops have no remainder at AVX-512 or AVX2 widths), and the arithmetic follows vmath.h's
-// rule (every multiply-add an explicit madd, no other product feeding an addition), so that
-// even a scalar execution of a lane gives the vector bits (motion_batch_test runs particles
-// alone, in blocks and reordered, and compares bits). Lanes outside the vector path's domain (an
-// angle argument beyond vmath's kSinCosMaxArg = 2^20 rad, a heading beyond about 3 pi after
-// the step, a non-finite value) are recomputed by the scalar model; whether a lane takes that
-// path also depends on its inputs alone.
-//
-// Layout: a `StateBlock<N>` borrows N columns of `lanes` doubles (component k of lane l at
-// col[k][l]); the covariance of predict_block borrows the N (N + 1) / 2 columns of the upper
-// triangle, row by row ((0,0), (0,1), ..., (0,N-1), (1,1), ...). `lanes` is a multiple of
-// kMotionLanes: callers pad their blocks (padding lanes hold any finite values and are computed
-// like the others). Columns must not overlap each other or the normals.
-//
-// Thread safety: pure functions of their arguments; concurrent calls on disjoint blocks are
-// safe. Costs: O(lanes * steps), no allocation (local arrays of up to 20 KB on the stack).
+// The motion models of engine/motion_model.h over a block of particles at once, in
+// structure-of-arrays columns, so the compiler vectorises across particles: sample_block (the
+// FastSLAM 1.0 draw) and predict_block (the FastSLAM 2.0 prior, mean and covariance), each
+// carrying a block through every queued control step in one call. Each equals the scalar model
+// up to rounding (vmath's sines; tests bound it by 1e-12), and a lane's bits depend on its own
+// inputs alone, whatever the block size or position (see docs/engine-config.md for how). Blocks
+// are padded to kMotionLanes; `StateBlock`/`CovBlock` borrow non-overlapping columns. Adding a
+// model means adding its `Lane` below. Pure functions: concurrent calls on disjoint blocks are
+// safe. Costs: O(lanes x steps), no allocation (up to 20 KB of stack arrays).
 #pragma once
 
 #include <algorithm>
@@ -182,13 +153,13 @@ struct Lane<UnicycleModel> {
 };
 
 template <>
-struct Lane<VictoriaParkModel> {
+struct Lane<AckermannModel> {
   static constexpr int kN = 3;
   static constexpr std::array<std::array<int, 2>, 2> kJacobianPattern = {{{0, 2}, {1, 2}}};
 
-  [[gnu::always_inline]] static bool move(const VictoriaParkModel& m, double (&s)[kN], double u0,
+  [[gnu::always_inline]] static bool move(const AckermannModel& m, double (&s)[kN], double u0,
                                           double u1, double dt) noexcept {
-    const VictoriaParkGeometry& g = m.geometry();
+    const AckermannGeometry& g = m.geometry();
     double ca, sa, c, sn;
     parallel::internal::sincos(u1, ca, sa);
     parallel::internal::sincos(s[2], c, sn);
@@ -204,10 +175,10 @@ struct Lane<VictoriaParkModel> {
     return ok;
   }
 
-  [[gnu::always_inline]] static void terms(const VictoriaParkModel& m, const double (&s)[kN],
+  [[gnu::always_inline]] static void terms(const AckermannModel& m, const double (&s)[kN],
                                            double u0, double u1, double dt, double (&j)[2],
                                            double (&v)[kN][2]) noexcept {
-    const VictoriaParkGeometry& g = m.geometry();
+    const AckermannGeometry& g = m.geometry();
     double ca, sa, c, sn;
     parallel::internal::sincos(u1, ca, sa);
     parallel::internal::sincos(s[2], c, sn);

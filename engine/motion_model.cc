@@ -13,15 +13,14 @@ BaileyCarModel::BaileyCarModel(double wheelbase) : wheelbase_(wheelbase) {
   }
 }
 
-VictoriaParkModel::VictoriaParkModel(const VictoriaParkGeometry& geometry) : g_(geometry) {
+AckermannModel::AckermannModel(const AckermannGeometry& geometry) : g_(geometry) {
   if (!std::isfinite(g_.a) || !std::isfinite(g_.b) || !std::isfinite(g_.l) ||
-      !std::isfinite(g_.h)) {
-    throw std::invalid_argument("VictoriaParkModel: every length must be finite");
-  }
-  if (g_.l <= 0.0 || g_.h < 0.0) {
+      !std::isfinite(g_.h) || g_.l <= 0.0 || g_.h < 0.0) {
     throw std::invalid_argument(
-        "VictoriaParkModel: need wheelbase l > 0 and encoder offset h >= 0, got l = " +
-        std::to_string(g_.l) + ", h = " + std::to_string(g_.h));
+        "AckermannModel: geometry must be finite with wheelbase l > 0 and encoder offset "
+        "h >= 0, got a = " +
+        std::to_string(g_.a) + ", b = " + std::to_string(g_.b) + ", l = " + std::to_string(g_.l) +
+        ", h = " + std::to_string(g_.h));
   }
 }
 

@@ -1,29 +1,11 @@
-// Vehicle motion models s_t = h(u_t, s_{t-1}) + delta, delta ~ N(0, P) (paper eq. 2), with
-// the Jacobians FastSLAM 2.0 and EKF-SLAM need and control-space noise mapped to state noise.
-//
-// Every model has one shape (the `MotionModel` concept below):
-//   predict(s, u, dt)            the noise-free motion h(u, s), heading wrapped to (-pi, pi]
-//   jacobian_pose(s, u, dt)      dh/ds at (s, u)
-//   jacobian_control(s, u, dt)   V = dh/du at (s, u)
-//   pose_noise(s, u, dt, M)      P = V M V^T for a control covariance M (symmetric by construction)
-//   sample(s, u, dt, sigmas, n)  h(u + sigmas .* n, s): the motion under a control perturbed by
-//                                independent normals; `n` points at kControlDim standard normals
-//                                the caller drew (the engine draws them from its keyed random
-//                                streams: models never own a generator). With n = 0 it is predict.
-// `sample` propagates the perturbed control through the nonlinear model (as Bailey's simulator and
-// FastSLAM code do); its spread matches pose_noise to first order in the noise. Note that P is
-// singular whenever the control has fewer dimensions than the state (rank 2 for every model here),
-// so code that needs P must not invert it (engine/proposal.h works in Kalman form for that reason).
-//
-// The models: `BaileyCarModel` (Bailey's simulator), `UnicycleModel` (v, omega),
-// `VictoriaParkModel` (Guivant-Nebot Ackermann car, state = the laser's pose), and
-// `BrownianVelocityModel` (no odometry, paper eq. 79-81, state (x, y, theta, v, omega)) and
-// `BrownianCurvatureModel` (no odometry, state (x, y, theta, v, kappa), theta_dot = v kappa).
-// All integrate one explicit Euler step of length dt, as the datasets' reference code does.
-//
-// Ownership: models are small value types (a few doubles). Thread safety: every method is const
-// and pure; one model may be used from any number of threads. Cost: O(1) per call, a handful of
-// sin/cos, no allocation; everything on the hot path is inline.
+// Vehicle motion models s_t = h(u_t, s_{t-1}) + delta, delta ~ N(0, P) (paper eq. 2): Bailey's
+// car, a unicycle, an Ackermann car with its sensor ahead of the rear axle, and two no-odometry
+// random walks (eq. 79-81). Each has the `MotionModel` shape: predict (noise-free, heading
+// wrapped), jacobian_pose, jacobian_control, pose_noise P = V M V^T (singular when the control
+// has fewer dimensions than the state; never invert it), and sample (the motion under a control
+// perturbed by normals the caller draws; models own no generator). Models are small value
+// types; every method is const and pure, safe from any number of threads; O(1) per call, no
+// allocation.
 #pragma once
 
 #include <cmath>
@@ -158,28 +140,28 @@ class UnicycleModel : public MotionModelBase<UnicycleModel, 3, 2> {
   }
 };
 
-// Geometry of the Victoria Park car (data/victoria_park/README.md, Guivant and Nebot): metres.
-struct VictoriaParkGeometry {
-  double a = 3.78;  // laser ahead of the rear axle
-  double b = 0.50;  // laser to the left of the centre line
-  double l = 2.83;  // wheelbase
-  double h = 0.76;  // encoder wheel (rear left) to the left of the centre line
+// Where an Ackermann car's sensor and odometry sit, in metres. No defaults for a particular car
+// (a data-set reader supplies them); l must be set.
+struct AckermannGeometry {
+  double a = 0.0;  // sensor ahead of the rear axle
+  double b = 0.0;  // sensor to the left of the centre line
+  double l = 0.0;  // wheelbase, > 0
+  double h = 0.0;  // encoder wheel (rear left) to the left of the centre line, >= 0
 };
 
-// The Victoria Park Ackermann car; the state is the LASER point's pose (x, y, phi). Control
+// An Ackermann car (Guivant and Nebot); the state is the SENSOR point's pose (x, y, phi). Control
 // (ve, alpha) = (rear-left encoder speed m/s, front steering angle rad, + = left):
 //   vc = ve / (1 - tan(alpha) H / L)                     (encoder -> rear-axle centre)
 //   x   += dt (vc cos(phi) - (vc / L) tan(alpha) (a sin(phi) + b cos(phi)))
 //   y   += dt (vc sin(phi) + (vc / L) tan(alpha) (a cos(phi) - b sin(phi)))
 //   phi += dt (vc / L) tan(alpha)
-// REQUIRES: |tan(alpha)| < L / H (about 75 degrees for the defaults) so vc is finite.
-class VictoriaParkModel : public MotionModelBase<VictoriaParkModel, 3, 2> {
+// REQUIRES: |tan(alpha)| < L / H so vc is finite.
+class AckermannModel : public MotionModelBase<AckermannModel, 3, 2> {
  public:
-  VictoriaParkModel() = default;
   // Throws std::invalid_argument unless every length is finite, l > 0 and h >= 0.
-  explicit VictoriaParkModel(const VictoriaParkGeometry& geometry);
+  explicit AckermannModel(const AckermannGeometry& geometry);
 
-  const VictoriaParkGeometry& geometry() const { return g_; }
+  const AckermannGeometry& geometry() const { return g_; }
 
   State predict(const State& s, const Control& u, double dt) const {
     const double t = std::tan(u[1]);
@@ -225,7 +207,7 @@ class VictoriaParkModel : public MotionModelBase<VictoriaParkModel, 3, 2> {
   }
 
  private:
-  VictoriaParkGeometry g_;
+  AckermannGeometry g_;
 };
 
 // How the heading turns in the no-odometry models below: the fifth state component c, walked
@@ -302,14 +284,14 @@ class BrownianModel : public MotionModelBase<BrownianModel<Turn>, 5, 2> {
   }
 };
 
-// The paper's model: state (x, y, theta, v, omega), MotionKind::kBrownian.
+// The paper's model: state (x, y, theta, v, omega).
 using BrownianVelocityModel = BrownianModel<TurnRateWalk>;
-// Speed and path curvature: state (x, y, theta, v, kappa), MotionKind::kBrownianCurvature.
+// Speed and path curvature: state (x, y, theta, v, kappa).
 using BrownianCurvatureModel = BrownianModel<CurvatureWalk>;
 
 static_assert(MotionModel<BaileyCarModel>);
 static_assert(MotionModel<UnicycleModel>);
-static_assert(MotionModel<VictoriaParkModel>);
+static_assert(MotionModel<AckermannModel>);
 static_assert(MotionModel<BrownianVelocityModel>);
 static_assert(MotionModel<BrownianCurvatureModel>);
 

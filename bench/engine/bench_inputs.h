@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstddef>
 #include <random>
+#include <type_traits>
 
 #include <Eigen/Core>
 
@@ -16,6 +17,17 @@
 #include "engine/proposal.h"
 
 namespace fastslam::engine::bench {
+
+// The motion model a benchmark runs: the model's default, and for the Ackermann car the
+// Victoria Park car's geometry (../shared/data/victoria_park/README.md).
+template <class Model>
+Model bench_motion_model() {
+  if constexpr (std::is_same_v<Model, AckermannModel>) {
+    return AckermannModel(AckermannGeometry{3.78, 0.50, 2.83, 0.76});
+  } else {
+    return Model();
+  }
+}
 
 struct Scenario {
   Pose pose;

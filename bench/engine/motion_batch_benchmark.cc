@@ -13,6 +13,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include "bench/engine/bench_inputs.h"
 #include "engine/motion_batch.h"
 #include "engine/motion_model.h"
 
@@ -62,7 +63,7 @@ void BM_MotionBatchSample(benchmark::State& state) {
   const auto lanes = static_cast<std::size_t>(state.range(0));
   const auto k = static_cast<std::size_t>(state.range(1));
   Inputs<Model> in(lanes, k);
-  const Model model;
+  const Model model = bench::bench_motion_model<Model>();
   const Eigen::Vector2d sigmas(0.3, 0.05);
   for (auto _ : state) {
     std::copy(in.initial.begin(), in.initial.end(), in.columns.begin());
@@ -77,7 +78,7 @@ void BM_MotionBatchPredict(benchmark::State& state) {
   const auto lanes = static_cast<std::size_t>(state.range(0));
   const auto k = static_cast<std::size_t>(state.range(1));
   Inputs<Model> in(lanes, k);
-  const Model model;
+  const Model model = bench::bench_motion_model<Model>();
   const Eigen::Vector2d sigmas(0.3, 0.05);
   for (auto _ : state) {
     std::copy(in.initial.begin(), in.initial.end(), in.columns.begin());
@@ -93,7 +94,7 @@ void BM_MotionScalarSample(benchmark::State& state) {
   const auto lanes = static_cast<std::size_t>(state.range(0));
   const auto k = static_cast<std::size_t>(state.range(1));
   Inputs<Model> in(lanes, k);
-  const Model model;
+  const Model model = bench::bench_motion_model<Model>();
   const Eigen::Vector2d sigmas(0.3, 0.05);
   for (auto _ : state) {
     std::copy(in.initial.begin(), in.initial.end(), in.columns.begin());
@@ -118,7 +119,7 @@ void shapes(benchmark::internal::Benchmark* b) {
 }
 
 BENCHMARK(BM_MotionBatchSample<BaileyCarModel>)->Apply(shapes);
-BENCHMARK(BM_MotionBatchSample<VictoriaParkModel>)->Apply(shapes);
+BENCHMARK(BM_MotionBatchSample<AckermannModel>)->Apply(shapes);
 BENCHMARK(BM_MotionBatchSample<BrownianVelocityModel>)->Apply(shapes);
 BENCHMARK(BM_MotionBatchSample<BrownianCurvatureModel>)->Apply(shapes);
 BENCHMARK(BM_MotionBatchPredict<BaileyCarModel>)->Apply(shapes);

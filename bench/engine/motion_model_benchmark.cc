@@ -10,7 +10,7 @@ namespace {
 
 template <class Model>
 void BM_MotionSample(benchmark::State& state) {
-  const Model model;
+  const Model model = bench_motion_model<Model>();
   const auto scenarios = make_scenarios(RangeBearingModel());
   const Eigen::Vector2d u(3.0, 0.1);
   const Eigen::Vector2d sigmas(0.3, 0.05);
@@ -23,11 +23,11 @@ void BM_MotionSample(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations());
 }
 BENCHMARK(BM_MotionSample<BaileyCarModel>);
-BENCHMARK(BM_MotionSample<VictoriaParkModel>);
+BENCHMARK(BM_MotionSample<AckermannModel>);
 
 template <class Model>
 void BM_MotionPrior(benchmark::State& state) {
-  const Model model;
+  const Model model = bench_motion_model<Model>();
   const auto scenarios = make_scenarios(RangeBearingModel());
   const Eigen::Vector2d u(3.0, 0.1);
   const Eigen::Matrix2d m = Model::control_covariance({0.3, 0.05});
@@ -40,7 +40,7 @@ void BM_MotionPrior(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations());
 }
 BENCHMARK(BM_MotionPrior<BaileyCarModel>);
-BENCHMARK(BM_MotionPrior<VictoriaParkModel>);
+BENCHMARK(BM_MotionPrior<AckermannModel>);
 
 }  // namespace
 }  // namespace fastslam::engine::bench

@@ -343,7 +343,7 @@ TEST(EkfSlamDenseTest, TwoLandmarksMatchTheTextbookEkfOverTheWholeState) {
 
 TEST(EkfSlamPredictTest, CovarianceIsCentralDifferenceJacobiansOfTheModel) {
   for (const MotionKind kind :
-       {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kVictoriaPark,
+       {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kAckermann,
         MotionKind::kBrownian, MotionKind::kBrownianCurvature}) {
     SCOPED_TRACE(std::string(to_string(kind)));
     FilterConfig config = ekf_config();
@@ -376,8 +376,8 @@ TEST(EkfSlamPredictTest, CovarianceIsCentralDifferenceJacobiansOfTheModel) {
         case MotionKind::kUnicycle:
           out.head<3>() = UnicycleModel().predict(s.head<3>(), u, dt);
           break;
-        case MotionKind::kVictoriaPark:
-          out.head<3>() = VictoriaParkModel(config.motion.geometry).predict(s.head<3>(), u, dt);
+        case MotionKind::kAckermann:
+          out.head<3>() = AckermannModel(config.motion.geometry).predict(s.head<3>(), u, dt);
           break;
         case MotionKind::kBrownian:
           out.head<5>() = BrownianVelocityModel().predict(s.head<5>(), u, dt);

@@ -265,12 +265,12 @@ TEST(MotionBatchTest, UnicycleMatchesTheScalarModel) {
   }
 }
 
-TEST(MotionBatchTest, VictoriaParkMatchesTheScalarModel) {
+TEST(MotionBatchTest, AckermannMatchesTheScalarModel) {
   std::mt19937_64 rng(3);
-  const VictoriaParkModel model;
+  const AckermannModel model(testing::kVictoriaParkCar);
   const Eigen::Vector2d sigmas(0.5, 2.0 * kPi / 180);
   for (const std::size_t count : kCounts) {
-    auto f = make_fixture<VictoriaParkModel>(count, 6, rng, random_pose, [](std::mt19937_64& r) {
+    auto f = make_fixture<AckermannModel>(count, 6, rng, random_pose, [](std::mt19937_64& r) {
       return ControlStep{uniform(r, 0, 6), uniform(r, -0.5, 0.5), uniform(r, 0.01, 0.2)};
     });
     check_sample(model, f, sigmas);
@@ -358,7 +358,7 @@ TEST(MotionBatchTest, LaneTermsAreTheScalarJacobians) {
   std::mt19937_64 rng(7);
   check_lane_terms(BaileyCarModel(4.0), random_pose, rng);
   check_lane_terms(UnicycleModel(), random_pose, rng);
-  check_lane_terms(VictoriaParkModel(), random_pose, rng);
+  check_lane_terms(AckermannModel(testing::kVictoriaParkCar), random_pose, rng);
   auto walk = [](std::mt19937_64& r) {
     Eigen::Matrix<double, 5, 1> s;
     s << uniform(r, -300, 300), uniform(r, -300, 300), testing::random_heading(r),
@@ -383,7 +383,7 @@ TEST(MotionBatchTest, LanesOutsideTheVectorDomainUseTheScalarModel) {
   Fixture<BaileyCarModel> huge_steer = f;
   huge_steer.steps[0].u1 = 3e6;  // every lane's steering is beyond the domain
   Fixture<BaileyCarModel> mixed = f;
-  mixed.normals[mixed.lanes + 5] = 2e8;  // lane 5's perturbed steering 1e7 rad
+  mixed.normals[mixed.lanes + 5] = 2e8;   // lane 5's perturbed steering 1e7 rad
   mixed.normals[mixed.lanes + 7] = 16.0;  // lane 7's 0.9 rad: beyond sincos_small's domain
   const Fixture<BaileyCarModel> before = mixed;
   sample_block(bailey, mixed.block(), mixed.steps, sigmas, mixed.normals.data());

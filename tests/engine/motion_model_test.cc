@@ -19,6 +19,7 @@
 namespace fastslam::engine {
 namespace {
 
+using testing::kVictoriaParkCar;
 using testing::matrices_near;
 using testing::numeric_jacobian;
 using testing::random_heading;
@@ -89,8 +90,8 @@ TEST(UnicycleModelTest, MatchesTheEulerStep) {
   EXPECT_DOUBLE_EQ(next[2], 0.5 - 0.04);
 }
 
-TEST(VictoriaParkModelTest, MatchesTheReadmeEquations) {
-  const VictoriaParkModel model;  // a = 3.78, b = 0.5, L = 2.83, H = 0.76
+TEST(AckermannModelTest, MatchesTheReadmeEquations) {
+  const AckermannModel model(kVictoriaParkCar);
   const double a = 3.78, b = 0.5, l = 2.83, h = 0.76;
   const Pose s(-67.65, -41.71, 0.66);
   const double ve = 2.5, alpha = -0.12, dt = 0.025;
@@ -106,12 +107,10 @@ TEST(VictoriaParkModelTest, MatchesTheReadmeEquations) {
   EXPECT_NEAR(next[2], s[2] + dt * pd, 1e-12);
 }
 
-TEST(VictoriaParkModelTest, RejectsBadGeometry) {
-  EXPECT_THROW(VictoriaParkModel(VictoriaParkGeometry{3.78, 0.5, 0.0, 0.76}),
-               std::invalid_argument);
-  EXPECT_THROW(VictoriaParkModel(VictoriaParkGeometry{3.78, 0.5, 2.83, -0.1}),
-               std::invalid_argument);
-  EXPECT_THROW(VictoriaParkModel(VictoriaParkGeometry{std::nan(""), 0.5, 2.83, 0.76}),
+TEST(AckermannModelTest, RejectsBadGeometry) {
+  EXPECT_THROW(AckermannModel(AckermannGeometry{3.78, 0.5, 0.0, 0.76}), std::invalid_argument);
+  EXPECT_THROW(AckermannModel(AckermannGeometry{3.78, 0.5, 2.83, -0.1}), std::invalid_argument);
+  EXPECT_THROW(AckermannModel(AckermannGeometry{std::nan(""), 0.5, 2.83, 0.76}),
                std::invalid_argument);
 }
 
@@ -177,7 +176,7 @@ TEST(MotionModelJacobianTest, AllModelsMatchCentralDifferences) {
   std::uniform_real_distribution<double> step(0.01, 0.5);
   const BaileyCarModel bailey(4.0);
   const UnicycleModel unicycle;
-  const VictoriaParkModel victoria;
+  const AckermannModel ackermann(kVictoriaParkCar);
   const BrownianVelocityModel brownian;
   const BrownianCurvatureModel curvature;
   const LinearGaussianMotion linear;
@@ -186,7 +185,7 @@ TEST(MotionModelJacobianTest, AllModelsMatchCentralDifferences) {
     const double dt = step(rng);
     expect_jacobians_match(bailey, s, Eigen::Vector2d(speed(rng), steer(rng)), dt);
     expect_jacobians_match(unicycle, s, Eigen::Vector2d(speed(rng), rate(rng)), dt);
-    expect_jacobians_match(victoria, s, Eigen::Vector2d(speed(rng), steer(rng)), dt);
+    expect_jacobians_match(ackermann, s, Eigen::Vector2d(speed(rng), steer(rng)), dt);
     BrownianVelocityModel::State b;
     b << s, speed(rng), rate(rng);
     expect_jacobians_match(brownian, b, Eigen::Vector2d(0.1 * rate(rng), 0.1 * rate(rng)), dt);
@@ -202,7 +201,7 @@ TEST(MotionModelJacobianTest, AllModelsMatchCentralDifferences) {
 }
 
 TEST(MotionModelNoiseTest, PoseNoiseIsVMVt) {
-  const VictoriaParkModel model;
+  const AckermannModel model(kVictoriaParkCar);
   const Pose s(3.0, 4.0, -2.0);
   const Eigen::Vector2d u(4.0, 0.3);
   Eigen::Matrix2d m;
@@ -268,14 +267,14 @@ TEST(MotionModelNoiseTest, SampleCovarianceMatchesPoseNoise) {
                         0.025, Eigen::Vector2d(0.3, 0.05235988), 1);
   expect_sample_moments(UnicycleModel(), Pose(0.0, 0.0, 1.0), Eigen::Vector2d(2.0, 0.3), 0.1,
                         Eigen::Vector2d(0.2, 0.05), 2);
-  expect_sample_moments(VictoriaParkModel(), Pose(-67.65, -41.71, 0.66), Eigen::Vector2d(3.0, 0.1),
-                        0.025, Eigen::Vector2d(0.3, 0.05), 3);
+  expect_sample_moments(AckermannModel(kVictoriaParkCar), Pose(-67.65, -41.71, 0.66),
+                        Eigen::Vector2d(3.0, 0.1), 0.025, Eigen::Vector2d(0.3, 0.05), 3);
 }
 
 // Dead reckoning over the whole Victoria Park odometry with the model, from the first GPS fix and
 // the README's fitted heading of 38.0 deg, reproduces the README's independent check: end point
 // DR (-158.4, -238.9). Each sample is integrated over the time to the next.
-TEST(VictoriaParkModelTest, DeadReckoningMatchesTheDatasetCheck) {
+TEST(AckermannModelTest, DeadReckoningMatchesTheDatasetCheck) {
   FASTSLAM_REQUIRE_SHARED(shared);
   std::ifstream in(shared + "/data/victoria_park/odometry.csv");
   ASSERT_TRUE(in) << "cannot open odometry.csv";
@@ -288,7 +287,7 @@ TEST(VictoriaParkModelTest, DeadReckoningMatchesTheDatasetCheck) {
     rows.push_back(r);
   }
   ASSERT_EQ(rows.size(), 61945u);
-  const VictoriaParkModel model;
+  const AckermannModel model(kVictoriaParkCar);
   Pose s(-67.649271, -41.714218, 38.0 * kPi / 180.0);
   for (std::size_t i = 0; i + 1 < rows.size(); ++i) {
     s = model.predict(s, rows[i].tail<2>(), rows[i + 1][0] - rows[i][0]);

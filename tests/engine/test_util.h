@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "engine/angles.h"
+#include "engine/motion_model.h"
 
 namespace fastslam::engine::testing {
 
@@ -71,5 +72,9 @@ inline double random_heading(std::mt19937_64& rng) {
       return u(rng);
   }
 }
+
+// The Victoria Park car's geometry (../shared/data/victoria_park/README.md), the Ackermann
+// model's test case.
+inline constexpr AckermannGeometry kVictoriaParkCar{3.78, 0.50, 2.83, 0.76};
 
 }  // namespace fastslam::engine::testing

@@ -6,6 +6,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/enum_names.h"
+
 namespace fastslam::tools {
 namespace {
 
@@ -143,14 +145,14 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "the data set's directory");
   add_world_options(cmd, o, w);
   cmd.add_option("--algorithm", w.algorithm, "FastSLAM version, or ekf (the EKF-SLAM baseline)")
-      ->check(CLI::IsMember({"fastslam1", "fastslam2", "ekf"}))
+      ->check(CLI::IsMember(engine::enum_names<Algorithm>()))
       ->capture_default_str();
   cmd.add_option("--motion", o.motion,
                  "odometry: the source's motion model; none: ignore the controls, Brownian "
                  "velocities (eq. 79-81; --sigma-u0/--sigma-u1 are the v and omega increments); "
                  "none-curvature: the same walking v and the path's curvature (1/m), so the "
                  "heading cannot turn while the vehicle stands")
-      ->check(CLI::IsMember({"odometry", "none", "none-curvature"}))
+      ->check(CLI::IsMember(motion_choices()))
       ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(CLI::Range(1U, 100'000'000U))
@@ -158,7 +160,7 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--association", w.association,
                  "data association: known (ids from the source), ml (maximum likelihood, "
                  "eq. 64) or das (sampling, eq. 65)")
-      ->check(CLI::IsMember({"known", "ml", "das"}))
+      ->check(CLI::IsMember(engine::enum_names<Association>()))
       ->capture_default_str();
   add_association_options(cmd, o);
   add_execution_options(cmd, o, w);
@@ -239,17 +241,10 @@ void apply_json_config(CLI::App& cmd, const std::string& path) {
 void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   const bool csv = !o.landmarks_csv.empty();
   o.sim.loops = w.loops > 0 ? w.loops : (csv ? 2 : 1);
-  o.filter.algorithm = w.algorithm == "ekf"         ? Algorithm::kEkf
-                       : w.algorithm == "fastslam2" ? Algorithm::kFastSlam2
-                                                    : Algorithm::kFastSlam1;
-  o.filter.association = w.association == "ml"    ? Association::kMaximumLikelihood
-                         : w.association == "das" ? Association::kDataAssociationSampling
-                                                  : Association::kKnown;
-  o.filter.resample.when = w.resample == "every" ? ResamplePolicy::When::kEveryStep
-                                                 : ResamplePolicy::When::kEssBelowFraction;
-  o.filter.resample.scheme = w.scheme == "stratified"    ? ResampleScheme::kStratified
-                             : w.scheme == "multinomial" ? ResampleScheme::kMultinomial
-                                                         : ResampleScheme::kSystematic;
+  o.filter.algorithm = engine::parse_enum<Algorithm>(w.algorithm);
+  o.filter.association = engine::parse_enum<Association>(w.association);
+  o.filter.resample.when = engine::parse_enum<ResamplePolicy::When>(w.resample);
+  o.filter.resample.scheme = engine::parse_enum<ResampleScheme>(w.scheme);
   auto given = [&](const char* name) {
     const CLI::Option* option = cmd.get_option_no_throw(name);
     return option != nullptr && option->count() > 0;
@@ -336,14 +331,14 @@ void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd.add_option("--resample", w.resample, "when to resample: every (scan) or neff")
-      ->check(CLI::IsMember({"every", "neff"}))
+      ->check(CLI::IsMember(engine::enum_names<ResamplePolicy::When>()))
       ->capture_default_str();
   cmd.add_option("--neff-fraction", f.resample.ess_fraction,
                  "with --resample neff: resample when N_eff < fraction x M")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd.add_option("--resample-scheme", w.scheme, "how to draw the ancestors")
-      ->check(CLI::IsMember({"systematic", "stratified", "multinomial"}))
+      ->check(CLI::IsMember(engine::enum_names<ResampleScheme>()))
       ->capture_default_str();
 }
 

@@ -16,6 +16,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "engine/filter_config.h"
 #include "tools/cli/run_command.h"
 
 namespace fastslam::tools {
@@ -24,10 +25,11 @@ namespace fastslam::tools {
 struct RunWords {
   int loops = 0;
   double spacing = 0, scan_period = 0;  // given or not: RunOptions' optionals
-  std::string algorithm = "fastslam1";
-  std::string association = "known";
-  std::string resample = "neff";
-  std::string scheme = "systematic";
+  // Names from the engine's tables (engine/filter_config.h): the defaults of FilterConfig.
+  std::string algorithm{engine::enum_name(engine::FilterConfig{}.algorithm)};
+  std::string association{engine::enum_name(engine::FilterConfig{}.association)};
+  std::string resample{engine::enum_name(engine::FilterConfig{}.resample.when)};
+  std::string scheme{engine::enum_name(engine::FilterConfig{}.resample.scheme)};
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
   double initial_heading_deg = 0;
   double vp_min_bearing_deg = 0, vp_max_bearing_deg = 0;  // given or not: the gate's defaults

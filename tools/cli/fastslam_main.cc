@@ -5,9 +5,12 @@
 #include <cstdio>
 #include <exception>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
+#include "engine/enum_names.h"
+#include "engine/filter_config.h"
 #include "tools/cli/command_line.h"
 #include "tools/cli/run_command.h"
 #include "tools/studies/lg_slam_experiment.h"
@@ -48,11 +51,13 @@ CLI::App* add_scaling_command(CLI::App& bench, ScalingCommand& c) {
                   "largest N the linear engine accepts (it is O(M N) per update)")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
       ->capture_default_str();
+  std::vector<std::string> versions = engine::enum_names<engine::Algorithm>();
+  std::erase(versions, std::string(engine::enum_name(engine::Algorithm::kEkf)));
   cmd->add_option("--algorithm", c.algorithm, "fastslam1 or fastslam2")
-      ->check(CLI::IsMember({"fastslam1", "fastslam2"}))
+      ->check(CLI::IsMember(versions))
       ->capture_default_str();
   cmd->add_option("--association", c.association, "known or ml or das")
-      ->check(CLI::IsMember({"known", "ml", "das"}))
+      ->check(CLI::IsMember(engine::enum_names<engine::Association>()))
       ->capture_default_str();
   cmd->add_option("--threads", c.options.threads,
                   "worker thread counts, comma separated (0: all cores)")
@@ -83,11 +88,8 @@ int finish_and_run_scaling(ScalingCommand& c) {
   using engine::Algorithm;
   using engine::Association;
   c.options.engine = c.engine == "linear" ? ScalingEngine::kLinear : ScalingEngine::kTree;
-  c.options.filter.algorithm =
-      c.algorithm == "fastslam2" ? Algorithm::kFastSlam2 : Algorithm::kFastSlam1;
-  c.options.filter.association = c.association == "known" ? Association::kKnown
-                                 : c.association == "das" ? Association::kDataAssociationSampling
-                                                          : Association::kMaximumLikelihood;
+  c.options.filter.algorithm = engine::parse_enum<Algorithm>(c.algorithm);
+  c.options.filter.association = engine::parse_enum<Association>(c.association);
   return run_scaling_command(c.options, c.json, c.csv);
 }
 

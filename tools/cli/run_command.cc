@@ -21,6 +21,7 @@
 
 #include "engine/angles.h"
 #include "engine/ekf_slam.h"
+#include "engine/enum_names.h"
 #include "engine/filter.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
@@ -358,14 +359,32 @@ SourceOptions source_options(const RunOptions& o) {
 }
 
 // Where the source's pose (the point its log and its GPS refer to) is relative to the point the
-// filter tracks: zero, except without odometry on Victoria Park. There the log's state is the
-// laser's pose, 3.78 m ahead of the rear axle and 0.5 m left of it, and the laser does not move
+// filter tracks: zero, except without odometry on an Ackermann car (Victoria Park). There the
+// log's state is the sensor's pose, (a, b) from the rear axle, and the sensor does not move
 // along its heading when the car turns (its sideslip reaches ~40 deg in tight turns), which the
 // Brownian model (eq. 81: x += v cos(theta) dt) assumes; the rear axle's centre does. So the
 // filter tracks the axle, the sensor sits at (a, b) from it, and the trajectory is reported at
 // the laser again.
+std::vector<std::string> motion_choices() {
+  std::vector<std::string> out = {"odometry"};
+  for (const std::string& name : engine::enum_names<engine::MotionKind>()) {
+    if (engine::without_odometry(engine::parse_enum<engine::MotionKind>(name))) out.push_back(name);
+  }
+  return out;
+}
+
+engine::MotionKind no_odometry_kind(const std::string& motion) {
+  for (const engine::EnumName<engine::MotionKind>& n :
+       engine::EnumNames<engine::MotionKind>::kNames) {
+    if (n.name == motion && engine::without_odometry(n.value)) return n.value;
+  }
+  std::string choices;
+  for (const std::string& c : motion_choices()) choices += (choices.empty() ? "" : ", ") + c;
+  throw std::invalid_argument("--motion '" + motion + "' is not supported (" + choices + ")");
+}
+
 engine::SensorOffset tracked_point_offset(const RunOptions& o, const LogHeader& h) {
-  if (o.motion == "odometry" || h.motion.kind != engine::MotionKind::kVictoriaPark) return {};
+  if (o.motion == "odometry" || h.motion.kind != engine::MotionKind::kAckermann) return {};
   return {h.motion.geometry.a, h.motion.geometry.b, 0.0};
 }
 
@@ -375,17 +394,13 @@ engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
   engine::FilterConfig config = o.filter;
   config.record_trajectory = true;
   config.motion = h.motion;
-  if (o.motion == "none") {
-    config.motion.kind = engine::MotionKind::kBrownian;
+  if (o.motion != "odometry") {
+    const engine::MotionKind kind = no_odometry_kind(o.motion);
+    config.motion.kind = kind;
     config.motion.sigma_control[0] = o.no_odometry_sigma[0];
-    config.motion.sigma_control[1] = o.no_odometry_sigma[1];
-  } else if (o.motion == "none-curvature") {
-    config.motion.kind = engine::MotionKind::kBrownianCurvature;
-    config.motion.sigma_control[0] = o.no_odometry_sigma[0];
-    config.motion.sigma_control[1] = o.no_odometry_sigma_kappa;
-  } else if (o.motion != "odometry") {
-    throw std::invalid_argument("--motion '" + o.motion +
-                                "' is not supported (odometry, none or none-curvature)");
+    config.motion.sigma_control[1] = kind == engine::MotionKind::kBrownianCurvature
+                                         ? o.no_odometry_sigma_kappa
+                                         : o.no_odometry_sigma[1];
   }
   config.sensor = h.sensor;
   if (o.noise.sigma_range) config.sensor.sigma_range = *o.noise.sigma_range;

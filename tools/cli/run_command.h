@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "engine/filter_config.h"
 #include "tools/datasets/sim_source.h"
@@ -91,12 +92,19 @@ SourceOptions source_options(const RunOptions& options);
 
 // The filter's configuration for a source with header `h` under `options`: the header's
 // models and noises, the options' algorithm, particles, association, ... and noise overrides;
-// without odometry the Brownian model, and on Victoria Park the rear axle tracked with the
-// laser at (a, b) from it plus the header's own sensor offset (`tracked_point_offset`).
+// without odometry the Brownian model, and on an Ackermann car the rear axle tracked with the
+// sensor at (a, b) from it plus the header's own sensor offset (`tracked_point_offset`).
 engine::FilterConfig filter_config(const RunOptions& options, const LogHeader& h);
 // Where the source's pose is relative to the point the filter tracks: zero, except without
-// odometry on Victoria Park ((a, b), the laser from the rear axle).
+// odometry on an Ackermann car ((a, b), the sensor from the rear axle).
 engine::SensorOffset tracked_point_offset(const RunOptions& options, const LogHeader& h);
+
+// The values --motion takes: "odometry" (the source's model), then the names of the models
+// without odometry (engine::MotionKind's table).
+std::vector<std::string> motion_choices();
+// The no-odometry model --motion names. Throws std::invalid_argument listing motion_choices()
+// for "odometry" or any other name.
+engine::MotionKind no_odometry_kind(const std::string& motion);
 
 // `fastslam run` on any source; returns the process exit code. Throws std::exception with a
 // clear message on bad options or unreadable files.

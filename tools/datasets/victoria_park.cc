@@ -48,7 +48,7 @@ void check_options(const VictoriaParkOptions& o) {
   require(!o.initial_heading || std::isfinite(*o.initial_heading),
           "initial_heading must be finite");
   // The model itself checks the geometry.
-  engine::VictoriaParkModel model(o.geometry);
+  engine::AckermannModel model(o.geometry);
 }
 
 struct Odometry {
@@ -215,7 +215,7 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
   });
 
   LogHeader& h = log.header;
-  h.motion.kind = engine::MotionKind::kVictoriaPark;
+  h.motion.kind = engine::MotionKind::kAckermann;
   h.motion.geometry = options.geometry;
   h.motion.sigma_control[0] = options.sigma_speed;
   h.motion.sigma_control[1] = options.sigma_steer;
@@ -239,8 +239,8 @@ VictoriaPark read_victoria_park(const std::string& dir, const VictoriaParkOption
     // Dead reckoning from the first fix with heading 0; at each GPS fix in the window, the
     // dead-reckoned displacement p and the GPS displacement q. The heading theta minimises
     // sum |R(theta) p - q|^2: theta = atan2(sum p x q, sum p . q).
-    const engine::VictoriaParkModel model(options.geometry);
-    engine::VictoriaParkModel::State s(0.0, 0.0, 0.0);
+    const engine::AckermannModel model(options.geometry);
+    engine::AckermannModel::State s(0.0, 0.0, 0.0);
     const double until = gps.front().time + options.heading_fit_seconds;
     double cross = 0.0, dot = 0.0;
     std::vector<std::array<double, 4>> pairs;

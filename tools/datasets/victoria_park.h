@@ -1,9 +1,10 @@
 // The Victoria Park data set (../shared/data/victoria_park/README.md) read into a native `Log`
 // (tools/io/log_format.h): odometry samples as controls (each stamped at the end of the interval
 // it is held over), laser scans with their gated tree detections as scans, GPS fixes as fixes,
-// in one time order (control, scan, GPS on equal times); the Guivant-Nebot car model with the
-// laser offset in the header, and the start pose from the first GPS fix with a heading fitted
-// to the GPS track. Reading is strict: every malformed row throws std::runtime_error
+// in one time order (control, scan, GPS on equal times); the Ackermann car model
+// (engine::AckermannModel) with this car's geometry and the laser offset in the header, and the
+// start pose from the first GPS fix with a heading fitted to the GPS track. Reading is strict:
+// every malformed row throws std::runtime_error
 // "<file>:<line>: <reason>" and nothing is returned; detections outside the gate are dropped
 // and counted. docs/victoria-park.md ("The reader") has the conventions in full.
 //
@@ -21,6 +22,11 @@
 #include "tools/io/log_format.h"
 
 namespace fastslam::tools {
+
+// The Victoria Park car (../shared/data/victoria_park/README.md, Guivant and Nebot), metres:
+// the laser 3.78 m ahead of the rear axle and 0.50 m left of the centre line, wheelbase 2.83 m,
+// the encoder wheel 0.76 m left of the centre line.
+inline constexpr engine::AckermannGeometry kVictoriaParkGeometry{3.78, 0.50, 2.83, 0.76};
 
 // Which tree detections are kept. Defaults:
 // - range 5..70 m: the published FastSLAM configuration for this data set (README, RFS-SLAM
@@ -43,7 +49,7 @@ struct VictoriaParkGate {
 
 struct VictoriaParkOptions {
   VictoriaParkGate gate;
-  engine::VictoriaParkGeometry geometry;  // a = 3.78, b = 0.5, L = 2.83, H = 0.76 (README)
+  engine::AckermannGeometry geometry = kVictoriaParkGeometry;
   // Noises written into the header (the filter's defaults for this source; flags override).
   // Chosen by a sweep on this data (FS1, M = 100, ML; session 2): GPS RMSE 11.4 m with table 1's
   // negative information, 6.7 m without it. The published RFS-SLAM variances the README quotes

@@ -1,5 +1,6 @@
 #include "tools/io/log_format.h"
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstring>
@@ -7,10 +8,14 @@
 #include <istream>
 #include <numbers>
 #include <ostream>
+#include <span>
 #include <sstream>
 #include <stdexcept>
 #include <string_view>
 #include <unordered_set>
+
+#include "engine/enum_names.h"
+#include "engine/motion_dispatch.h"
 
 namespace fastslam::tools {
 namespace {
@@ -127,29 +132,7 @@ class Parser {
       if (key == "motion") {
         once(motion);
         if (tokens_.size() < 2) fail("motion needs a kind");
-        const std::string_view kind = tokens_[1];
-        if (kind == "bailey-car") {
-          fields(3, "motion bailey-car WHEELBASE");
-          h.motion.kind = MotionKind::kBaileyCar;
-          h.motion.wheelbase = positive(2, "wheelbase");
-        } else if (kind == "victoria-park") {
-          fields(6, "motion victoria-park A B L H");
-          h.motion.kind = MotionKind::kVictoriaPark;
-          h.motion.geometry = {number(2, "a"), number(3, "b"), positive(4, "l"),
-                               non_negative(5, "h")};
-        } else if (kind == "unicycle") {
-          fields(2, "motion unicycle");
-          h.motion.kind = MotionKind::kUnicycle;
-        } else if (kind == "none") {
-          fields(2, "motion none");
-          h.motion.kind = MotionKind::kBrownian;
-        } else if (kind == "none-curvature") {
-          fields(2, "motion none-curvature");
-          h.motion.kind = MotionKind::kBrownianCurvature;
-        } else {
-          fail("unknown motion kind '" + std::string(kind) +
-               "' (bailey-car, victoria-park, unicycle, none or none-curvature)");
-        }
+        read_motion(h.motion);
       } else if (key == "control_noise") {
         once(noise);
         fields(3, "control_noise SIGMA0 SIGMA1");
@@ -182,6 +165,31 @@ class Parser {
     if (!noise) fail("header has no 'control_noise' line");
     if (!sensor) fail("header has no 'sensor' line");
     if (!start) fail("header has no 'start' line");
+  }
+
+  // "motion KIND PARAMETERS...": the kind's parameters in engine::MotionTraits order, checked
+  // by the model's constructor.
+  void read_motion(engine::MotionConfig& m) {
+    try {
+      m.kind = engine::parse_enum<MotionKind>(tokens_[1]);
+    } catch (const std::invalid_argument& e) {
+      fail(e.what());
+    }
+    const std::span<const engine::MotionParameter> parameters = engine::motion_parameters(m.kind);
+    std::string form = "motion " + std::string(engine::enum_name(m.kind));
+    for (const engine::MotionParameter& p : parameters) {
+      form += ' ';
+      for (const char c : p.name) form += static_cast<char>(std::toupper(c));
+    }
+    fields(2 + parameters.size(), form.c_str());
+    for (std::size_t i = 0; i < parameters.size(); ++i) {
+      parameters[i].set(m, number(2 + i, std::string(parameters[i].name).c_str()));
+    }
+    try {
+      engine::visit_motion(m, [](const auto& /*model*/) {});
+    } catch (const std::invalid_argument& e) {
+      fail(e.what());
+    }
   }
 
   // Next line with content (blank lines and '#' comments skipped) into tokens_.
@@ -267,11 +275,11 @@ bool operator==(const LogHeader& a, const LogHeader& b) {
   const engine::SensorConfig& s = a.sensor;
   const engine::SensorConfig& t = b.sensor;
   // Only the parameters of the header's motion kind are part of a log.
-  const bool car = m.kind != MotionKind::kBaileyCar || same_bits(m.wheelbase, n.wheelbase);
-  const bool vp = m.kind != MotionKind::kVictoriaPark ||
-                  (same_bits(m.geometry.a, n.geometry.a) && same_bits(m.geometry.b, n.geometry.b) &&
-                   same_bits(m.geometry.l, n.geometry.l) && same_bits(m.geometry.h, n.geometry.h));
-  return m.kind == n.kind && car && vp && same_bits(m.sigma_control[0], n.sigma_control[0]) &&
+  bool parameters = true;
+  for (const engine::MotionParameter& p : engine::motion_parameters(m.kind)) {
+    parameters = parameters && same_bits(p.get(m), p.get(n));
+  }
+  return m.kind == n.kind && parameters && same_bits(m.sigma_control[0], n.sigma_control[0]) &&
          same_bits(m.sigma_control[1], n.sigma_control[1]) &&
          same_bits(s.sigma_range, t.sigma_range) && same_bits(s.sigma_bearing, t.sigma_bearing) &&
          same_bits(s.max_range, t.max_range) && same_bits(s.field_of_view, t.field_of_view) &&
@@ -334,29 +342,18 @@ void put(std::string& line, std::uint64_t v) {
 LogWriter::LogWriter(std::ostream& out, const LogHeader& h) : out_(out), last_time_(h.start_time) {
   const engine::MotionConfig& m = h.motion;
   const engine::SensorConfig& s = h.sensor;
-  for (double v : {m.wheelbase, m.geometry.a, m.geometry.b, m.geometry.l, m.geometry.h,
-                   m.sigma_control[0], m.sigma_control[1], s.sigma_range, s.sigma_bearing,
+  if (!engine::enum_known(m.kind)) throw std::invalid_argument("LogWriter: unknown motion kind");
+  const std::span<const engine::MotionParameter> parameters = engine::motion_parameters(m.kind);
+  for (const engine::MotionParameter& p : parameters) require_finite(p.get(m), "a header value");
+  for (double v : {m.sigma_control[0], m.sigma_control[1], s.sigma_range, s.sigma_bearing,
                    s.max_range, s.field_of_view, s.offset.x, s.offset.y, s.offset.yaw, h.start_time,
                    h.start_pose[0], h.start_pose[1], h.start_pose[2]}) {
     require_finite(v, "a header value");
   }
   std::string& l = line_;
   l = "fastslam-log 1\n# docs/log-format.md\nmotion ";
-  l += engine::to_string(m.kind);
-  switch (m.kind) {
-    case MotionKind::kBaileyCar:
-      put(l, m.wheelbase);
-      break;
-    case MotionKind::kVictoriaPark:
-      for (double v : {m.geometry.a, m.geometry.b, m.geometry.l, m.geometry.h}) put(l, v);
-      break;
-    case MotionKind::kUnicycle:
-    case MotionKind::kBrownian:
-    case MotionKind::kBrownianCurvature:
-      break;
-    default:
-      throw std::invalid_argument("LogWriter: unknown motion kind");
-  }
+  l += engine::enum_name(m.kind);
+  for (const engine::MotionParameter& p : parameters) put(l, p.get(m));
   l += "\ncontrol_noise";
   put(l, m.sigma_control[0]);
   put(l, m.sigma_control[1]);

@@ -41,6 +41,7 @@ Simulator::Simulator(const World& world, const SimConfig& config, std::uint64_t 
     throw std::invalid_argument("simulator: noise standard deviations must not be negative");
   }
   if (config.loops < 1) throw std::invalid_argument("simulator: loops must be at least 1");
+  car_ = engine::BaileyCarModel(config.wheelbase);
   if (!(config.clutter_rate >= 0) || !(config.clutter_rate <= 1000)) {
     throw std::invalid_argument("simulator: clutter_rate must be in [0, 1000] per scan");
   }
@@ -72,11 +73,11 @@ bool Simulator::next(SimStep& step) {
     steer_ += delta;
     if (std::abs(steer_) > config_.max_steer) steer_ = std::copysign(config_.max_steer, steer_);
   }
-  // vehicle_model.m
+  // vehicle_model.m: the engine's BaileyCarModel, the motion the filter assumes.
   const double v = config_.speed;
-  pose_.x += v * config_.dt * std::cos(steer_ + pose_.theta);
-  pose_.y += v * config_.dt * std::sin(steer_ + pose_.theta);
-  pose_.theta = wrap(pose_.theta + v * config_.dt * std::sin(steer_) / config_.wheelbase);
+  const engine::BaileyCarModel::State moved =
+      car_.predict({pose_.x, pose_.y, pose_.theta}, {v, steer_}, config_.dt);
+  pose_ = {moved[0], moved[1], moved[2]};
 
   parallel::RandomStream noise({seed_, step_, kControlStream, parallel::Purpose::kSimulator});
   const double nv = noise.normal();

@@ -1,8 +1,9 @@
-// Bailey's SLAM simulator (fastslam1_sim.m and friends), reproduced step for step: a car-like
-// vehicle steers toward each waypoint in turn (limited steering angle and rate), drives the
-// route a given number of loops, and every observation period sees the landmarks within range
-// in front of it. Controls and observations get Gaussian noise from the keyed random streams,
-// so a run is a pure function of (world, config, seed). Ground truth is recorded with each step.
+// Bailey's SLAM simulator (fastslam1_sim.m and friends), reproduced step for step: a car
+// (engine::BaileyCarModel) steers toward each waypoint in turn (limited steering angle and
+// rate), drives the route a given number of loops, and every observation period sees the
+// landmarks within range in front of it. Controls and observations get Gaussian noise from the
+// keyed random streams, so a run is a pure function of (world, config, seed). Ground truth is
+// recorded with each step.
 //
 // Ownership: a `Simulator` borrows the `World`, which must outlive it.
 // Thread safety: thread-compatible; distinct simulators are independent.
@@ -14,6 +15,7 @@
 #include <numbers>
 #include <vector>
 
+#include "engine/motion_model.h"
 #include "tools/sim/world.h"
 
 namespace fastslam::tools {
@@ -85,6 +87,7 @@ class Simulator {
 
   const World* world_;
   SimConfig config_;
+  engine::BaileyCarModel car_;  // the true motion, config_.wheelbase
   std::uint64_t seed_;
   TruthIndex index_;
   TruePose pose_;

@@ -219,7 +219,7 @@ TEST_F(CommandLine, VictoriaParkGateFlags) {
   EXPECT_DOUBLE_EQ(run("{}", "--vp-laser-yaw-deg -0.5").victoria_park.laser_yaw,
                    -0.5 * std::numbers::pi / 180);
   // The laser's place on the car (the model's a and b): the README's values unless given.
-  const engine::VictoriaParkGeometry nominal;
+  const engine::AckermannGeometry nominal = kVictoriaParkGeometry;
   EXPECT_EQ(o.victoria_park.geometry.a, nominal.a);
   EXPECT_EQ(o.victoria_park.geometry.b, nominal.b);
   o = run(R"({"vp-laser-y": 0.25})", "--vp-laser-x 3.6");

@@ -388,7 +388,7 @@ TEST(RunCommand, StartHeadingOverrideAndTheAlignedGpsError) {
 // moves back to the axle; with odometry the header's offset is used as it is.
 TEST(RunCommand, FilterConfigComposesTheAxleWithTheHeadersOffset) {
   LogHeader h;
-  h.motion.kind = engine::MotionKind::kVictoriaPark;
+  h.motion.kind = engine::MotionKind::kAckermann;
   h.motion.geometry.a = 3.78;
   h.motion.geometry.b = 0.5;
   h.sensor.offset = {0.0, 0.0, -0.01};
@@ -397,7 +397,7 @@ TEST(RunCommand, FilterConfigComposesTheAxleWithTheHeadersOffset) {
   h.start_pose[2] = std::numbers::pi / 2;
   RunOptions o;
   engine::FilterConfig c = filter_config(o, h);
-  EXPECT_EQ(c.motion.kind, engine::MotionKind::kVictoriaPark);
+  EXPECT_EQ(c.motion.kind, engine::MotionKind::kAckermann);
   EXPECT_EQ(c.sensor.offset.x, 0.0);
   EXPECT_EQ(c.sensor.offset.yaw, -0.01);
   EXPECT_EQ(c.initial_pose[0], 10.0);
@@ -429,7 +429,8 @@ TEST(RunCommand, FilterConfigComposesTheAxleWithTheHeadersOffset) {
 
 TEST(RunCommand, NoOdometryOnVictoriaParkReportsTheLaserPose) {
   Log log;
-  log.header.motion.kind = engine::MotionKind::kVictoriaPark;
+  log.header.motion.kind = engine::MotionKind::kAckermann;
+  log.header.motion.geometry = kVictoriaParkGeometry;
   log.header.start_pose[0] = 10.0;
   log.header.start_pose[1] = -4.0;
   log.header.start_pose[2] = 2.0;

@@ -46,7 +46,7 @@ TEST(VictoriaParkRun, FastSlam1WithMaximumLikelihoodMatchesThePaper) {
   EXPECT_EQ(m["steps"], 61945);
   EXPECT_EQ(m["scans"], 7249);
   EXPECT_EQ(m["gps_fixes_used"], 4466);
-  EXPECT_EQ(m["motion"], "victoria-park");
+  EXPECT_EQ(m["motion"], "ackermann");
   // The paper: "just over 4 m". Seed 1 measures 3.09 m (seeds 1-5: 3.09 to 4.06 m, mean 3.60;
   // docs/victoria-park.md); the 60 s heading fit gave 6.7 m, table 1's negative information
   // over the whole 70 m 6.2 to 20 m.
@@ -90,7 +90,7 @@ TEST(VictoriaParkRun, FastSlam1WithoutOdometryIsWithinOneAndAHalfOfOdometry) {
                              "--vp-laser-yaw-deg -1.1 --seed 1";
   const nlohmann::json odometry = run(common + " --particles 100", "yaw_odometry");
   const nlohmann::json none = run(common + " --particles 300 --motion none", "yaw_none");
-  EXPECT_EQ(odometry["motion"], "victoria-park");
+  EXPECT_EQ(odometry["motion"], "ackermann");
   EXPECT_EQ(none["motion"], "none");
   EXPECT_EQ(none["gps_fixes_used"], 4466);
   const double with = odometry["gps_rmse_m"].get<double>();
@@ -132,6 +132,53 @@ TEST(VictoriaParkRun, FastSlam2WithoutOdometryKeepsTheVelocitiesGaussian) {
   const double rmse = m["gps_rmse_m"].get<double>();
   EXPECT_LT(rmse, 5.5);
   EXPECT_GT(rmse, 1.0);
+}
+
+// `fastslam convert` writes the data set as a native log whose header names the generic
+// Ackermann model with this car's geometry; running that log equals running the data set
+// directly, with odometry and without it (which tracks the rear axle at (a, b) from the laser).
+TEST(VictoriaParkRun, ConvertedLogRunsLikeTheDataSet) {
+  FASTSLAM_REQUIRE_SHARED(shared);
+  const std::string log_path = testing::temp_path("vp_converted") + ".log";
+  {
+    CLI::App app;
+    RunOptions o;
+    RunWords w;
+    add_convert_options(app, o, w);
+    app.parse("--source victoria-park --data " + shared + "/data/victoria_park --out " + log_path,
+              false);
+    finish_run_options(app, w, o);
+    ASSERT_EQ(convert_to_log(o), 0);
+  }
+  std::ifstream in(log_path);
+  std::string line;
+  while (std::getline(in, line) && line.rfind("motion", 0) != 0) {
+  }
+  EXPECT_EQ(line, "motion ackermann 3.78 0.5 2.83 0.76");
+  // The log source has no data-set presets: give Victoria Park's (VictoriaParkFilterDefaults).
+  const VictoriaParkFilterDefaults vp;
+  const std::string filter =
+      " --algorithm fastslam1 --particles 10 --association ml --seed 3 "
+      "--existence-range-margin " +
+      std::to_string(vp.existence_range_margin) + " --existence-missed " +
+      std::to_string(vp.existence_missed);
+  for (const std::string motion : {"odometry", "none"}) {
+    SCOPED_TRACE(motion);
+    const nlohmann::json direct = run("--source victoria-park --data " + shared +
+                                          "/data/victoria_park --motion " + motion + filter,
+                                      "direct_" + motion);
+    const nlohmann::json logged =
+        run("--source log --data " + log_path + " --motion " + motion + filter, "log_" + motion);
+    EXPECT_EQ(logged["motion"], motion == "odometry" ? "ackermann" : "none");
+    EXPECT_EQ(logged["motion"], direct["motion"]);
+    for (const char* key : {"steps", "scans", "landmarks", "gps_fixes_used"}) {
+      EXPECT_EQ(logged[key], direct[key]) << key;
+    }
+    for (const char* key : {"gps_rmse_m", "log_evidence", "final_gps_error_m"}) {
+      EXPECT_EQ(logged[key].get<double>(), direct[key].get<double>()) << key;
+    }
+  }
+  std::filesystem::remove(log_path);
 }
 
 }  // namespace

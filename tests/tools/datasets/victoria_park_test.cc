@@ -105,7 +105,7 @@ TEST_F(VictoriaParkFiles, ReadsEveryRecordInTimeOrder) {
   EXPECT_EQ(log.observations[0].id, -1);
   // Header: the car, the gate as the sensor's reach, the first fix as the start.
   const LogHeader& h = log.header;
-  EXPECT_EQ(h.motion.kind, engine::MotionKind::kVictoriaPark);
+  EXPECT_EQ(h.motion.kind, engine::MotionKind::kAckermann);
   EXPECT_EQ(h.motion.geometry.a, 3.78);
   EXPECT_EQ(h.motion.geometry.h, 0.76);
   EXPECT_EQ(h.sensor.max_range, 70.0);

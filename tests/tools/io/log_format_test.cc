@@ -15,6 +15,7 @@
 
 #include <gtest/gtest.h>
 
+#include "engine/motion_dispatch.h"
 #include "tests/tools/temp_path.h"
 
 namespace fastslam::tools {
@@ -82,9 +83,9 @@ Log sample_log(engine::MotionKind kind) {
 }
 
 TEST(LogFormat, RoundTripIsBitExactForEveryMotionKind) {
-  for (auto kind : {engine::MotionKind::kBaileyCar, engine::MotionKind::kUnicycle,
-                    engine::MotionKind::kVictoriaPark, engine::MotionKind::kBrownian,
-                    engine::MotionKind::kBrownianCurvature}) {
+  for (const auto& entry : engine::EnumNames<engine::MotionKind>::kNames) {
+    if (entry.alias) continue;
+    const engine::MotionKind kind = entry.value;
     const Log log = sample_log(kind);
     std::stringstream text;
     write_log(text, log);
@@ -116,7 +117,7 @@ TEST(LogFormat, EqualityNoticesAOneUlpChange) {
 }
 
 TEST(LogFormat, FileRoundTripAndTheDocumentedShape) {
-  const Log log = sample_log(engine::MotionKind::kVictoriaPark);
+  const Log log = sample_log(engine::MotionKind::kAckermann);
   const std::string path = testing::temp_path("log_test") + ".log";
   write_log(path, log);
   EXPECT_TRUE(read_log(path) == log);
@@ -126,8 +127,30 @@ TEST(LogFormat, FileRoundTripAndTheDocumentedShape) {
   EXPECT_EQ(first, "fastslam-log 1");
   while (std::getline(in, motion) && motion.rfind("motion", 0) != 0) {
   }
-  EXPECT_EQ(motion, "motion victoria-park 3.78 0.5 2.83 0.76");
+  EXPECT_EQ(motion, "motion ackermann 3.78 0.5 2.83 0.76");
   std::filesystem::remove(path);
+}
+
+// Logs written before the Ackermann model had its generic name say `victoria-park`: they read as
+// the same model and parameters, and are written back under the canonical name.
+TEST(LogFormat, ReadsTheVictoriaParkAliasAsAckermann) {
+  const Log log = sample_log(engine::MotionKind::kAckermann);
+  std::stringstream text;
+  write_log(text, log);
+  std::string old = text.str();
+  const std::string motion = "\nmotion ackermann ";
+  const std::size_t at = old.find(motion);
+  ASSERT_NE(at, std::string::npos);
+  old.replace(at, motion.size(), "\nmotion victoria-park ");
+  std::istringstream in(old);
+  const Log back = read_log(in, "old.log");
+  EXPECT_EQ(back.header.motion.kind, engine::MotionKind::kAckermann);
+  EXPECT_EQ(back.header.motion.geometry.a, 3.78);
+  EXPECT_EQ(back.header.motion.geometry.h, 0.76);
+  EXPECT_TRUE(back == log);
+  std::stringstream again;
+  write_log(again, back);
+  EXPECT_EQ(again.str(), text.str());
 }
 
 constexpr const char* kHeader =
@@ -174,11 +197,19 @@ TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
       {"fastslam-log 1\nmotion bailey-car 4\n", "x.log:2: end of file inside the header"},
       {"fastslam-log 1\nmotion bicycle 4\n", "x.log:2: unknown motion kind 'bicycle'"},
       {"fastslam-log 1\nmotion bailey-car\n", "x.log:2: 'motion' needs 3 fields"},
-      {"fastslam-log 1\nmotion bailey-car -4\n", "x.log:2: wheelbase must be > 0"},
+      {"fastslam-log 1\nmotion bailey-car -4\n",
+       "x.log:2: BaileyCarModel: wheelbase must be finite and > 0"},
+      {"fastslam-log 1\nmotion ackermann 3.78 0.5 2.83\n",
+       "x.log:2: 'motion' needs 6 fields (motion ackermann A B L H)"},
+      {"fastslam-log 1\nmotion victoria-park 3.78 0.5 0 0.76\n",
+       "x.log:2: AckermannModel: geometry must be finite with wheelbase l > 0"},
+      {"fastslam-log 1\nmotion ackermann 3.78 0.5 2.83 -1\n",
+       "x.log:2: AckermannModel: geometry must be finite"},
+      {"fastslam-log 1\nmotion ackermann 3.78 x 2.83 0.76\n", "x.log:2: b: 'x' is not a number"},
       {"fastslam-log 1\nmotion none-curvature 0.1\n", "x.log:2: 'motion' needs 2 fields"},
       {"fastslam-log 1\nmotion none_curvature\n",
-       "x.log:2: unknown motion kind 'none_curvature' (bailey-car, victoria-park, unicycle, none "
-       "or none-curvature)"},
+       "x.log:2: unknown motion kind 'none_curvature' (bailey-car, unicycle, ackermann, none or "
+       "none-curvature)"},
       {"fastslam-log 1\nmotion none-curvature\ncontrol_noise 0.1 -0.01\n",
        "x.log:3: sigma1 must be >= 0"},
       {"fastslam-log 1\nmotion unicycle\nmotion unicycle\n",
