@@ -94,8 +94,7 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
   Impl& impl = *impl_;
   internal::FilterState& s = impl.state;
   const bool known_ids = s.config.association == Association::kKnown;
-  internal::MapCheck checked =
-      internal::check_map(landmarks, known_ids, s.landmark_variance_bound);
+  internal::MapCheck checked = internal::check_map(landmarks, known_ids, s.landmark_variance_bound);
   impl.drain();
   memory::LandmarkTree map(s.heap);
   memory::SpatialIndex index(s.heap);

@@ -32,9 +32,8 @@ struct Fs2Draw {
 
 // `chosen[j]` is observation j's slot or kNewLandmark; `normals` N standard normals.
 template <int N>
-Fs2Draw<N> fold_and_draw(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
-                         double log_p0, const PoseGaussian<N>& prior,
-                         const memory::LandmarkTree& map,
+Fs2Draw<N> fold_and_draw(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, double log_p0,
+                         const PoseGaussian<N>& prior, const memory::LandmarkTree& map,
                          const std::vector<PlannedObservation>& scan,
                          std::span<const std::int64_t> chosen, const double* normals) {
   PoseGaussian<N> proposal = prior;

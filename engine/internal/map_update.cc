@@ -48,17 +48,17 @@ void apply_negative_information(const MapUpdateInput& in, const Pose& pose,
   const ExistenceConfig& ex = in.existence;
   const Eigen::Vector2d at = in.sensor->sensor_position(pose);
   scratch.in_view.clear();
-  index.in_footprint(at[0], at[1], pose[2] + in.sensor->offset().yaw, in.max_range - ex.range_margin,
-                     in.field_of_view, [&](const memory::SpatialEntry& e) {
+  index.in_footprint(at[0], at[1], pose[2] + in.sensor->offset().yaw,
+                     in.max_range - ex.range_margin, in.field_of_view,
+                     [&](const memory::SpatialEntry& e) {
                        if (std::find(scratch.touched.begin(), scratch.touched.end(), e.slot) ==
                            scratch.touched.end()) {
                          scratch.in_view.push_back(e);
                        }
                      });
-  std::sort(scratch.in_view.begin(), scratch.in_view.end(),
-            [](const memory::SpatialEntry& a, const memory::SpatialEntry& b) {
-              return a.slot < b.slot;
-            });
+  std::sort(
+      scratch.in_view.begin(), scratch.in_view.end(),
+      [](const memory::SpatialEntry& a, const memory::SpatialEntry& b) { return a.slot < b.slot; });
   for (const memory::SpatialEntry& e : scratch.in_view) {
     const double log_odds = map.at(e.slot).log_odds - ex.missed;
     if (log_odds < ex.remove_below) {
@@ -89,8 +89,7 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          std::span<const std::uint32_t> chosen_terms, memory::LandmarkTree& map,
                          memory::SpatialIndex& index, MapUpdateScratch& scratch,
                          MapUpdateCounts& counts) {
-  update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, index,
-                      scratch.touched);
+  update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, index, scratch.touched);
   const ExistenceConfig& ex = in.existence;
   if (ex.negative_information && in.max_range > ex.range_margin) {
     apply_negative_information(in, pose, map, index, scratch, counts);
@@ -125,7 +124,6 @@ template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
                                         std::span<const std::int64_t>,
                                         std::span<const LandmarkObservation>,
                                         std::span<const std::uint32_t>, memory::LandmarkTree&,
-                                        memory::SpatialIndex&, MapUpdateScratch&,
-                                        MapUpdateCounts&);
+                                        memory::SpatialIndex&, MapUpdateScratch&, MapUpdateCounts&);
 
 }  // namespace fastslam::engine::internal

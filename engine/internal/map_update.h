@@ -66,16 +66,20 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          memory::SpatialIndex& index, MapUpdateScratch& scratch,
                          MapUpdateCounts& counts);
 
-extern template void update_particle_map<false>(
-    const MapUpdateInput&, const Pose&, const std::vector<PlannedObservation>&,
-    std::span<const std::int64_t>, std::span<const LandmarkObservation>,
-    std::span<const std::uint32_t>, memory::LandmarkTree&, memory::SpatialIndex&,
-    MapUpdateScratch&, MapUpdateCounts&);
-extern template void update_particle_map<true>(
-    const MapUpdateInput&, const Pose&, const std::vector<PlannedObservation>&,
-    std::span<const std::int64_t>, std::span<const LandmarkObservation>,
-    std::span<const std::uint32_t>, memory::LandmarkTree&, memory::SpatialIndex&,
-    MapUpdateScratch&, MapUpdateCounts&);
+extern template void update_particle_map<false>(const MapUpdateInput&, const Pose&,
+                                                const std::vector<PlannedObservation>&,
+                                                std::span<const std::int64_t>,
+                                                std::span<const LandmarkObservation>,
+                                                std::span<const std::uint32_t>,
+                                                memory::LandmarkTree&, memory::SpatialIndex&,
+                                                MapUpdateScratch&, MapUpdateCounts&);
+extern template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
+                                               const std::vector<PlannedObservation>&,
+                                               std::span<const std::int64_t>,
+                                               std::span<const LandmarkObservation>,
+                                               std::span<const std::uint32_t>,
+                                               memory::LandmarkTree&, memory::SpatialIndex&,
+                                               MapUpdateScratch&, MapUpdateCounts&);
 
 // A landmark tree's spatial index, built entry by entry in slot order.
 void index_map(const memory::LandmarkTree& map, memory::SpatialIndex& index);

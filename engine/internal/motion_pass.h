@@ -130,7 +130,8 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
       } else {
         sample_block(motion, block, run, sigmas, column(N + 2 * j));
       }
-      if (recorded != nullptr) motion_pass_detail::record_poses(block, k, m, begin, count, recorded);
+      if (recorded != nullptr)
+        motion_pass_detail::record_poses(block, k, m, begin, count, recorded);
     }
   }
   for (int k = 0; k < N; ++k) std::copy_n(block.col[k], count, store_col[k] + begin);

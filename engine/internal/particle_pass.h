@@ -34,7 +34,7 @@ struct PassScratch {
   std::vector<double> draws;  // FastSLAM 2.0: N normals per particle of the block
   KnownScratch known;
   CandidateScratch search;
-  std::vector<std::int64_t> assignment;   // observation j: a slot or kNewLandmark
+  std::vector<std::int64_t> assignment;     // observation j: a slot or kNewLandmark
   std::vector<std::uint32_t> chosen_terms;  // 1.0: observation j's terms in search.terms
   std::vector<memory::Slot> taken;          // DAS scratch
   MapUpdateScratch map;
@@ -89,10 +89,10 @@ class ParticlePass final : public Pass {
     in.motion.sigma_control[1] = c.motion.sigma_control[1];
     in.motion.ahead = &ahead_.ready();
     in.known = {&s_.sensor, s_.r, c.existence, scan_step};
-    in.search = {&s_.sensor, s_.r, c.gating.gate, c.gating.search_scale, c.log_new_landmark,
-                 s_.landmark_variance_bound};
-    in.map = {&s_.sensor, s_.r, c.existence, c.sensor.max_range, c.sensor.field_of_view,
-              scan_step};
+    in.search = {&s_.sensor,         s_.r,
+                 c.gating.gate,      c.gating.search_scale,
+                 c.log_new_landmark, s_.landmark_variance_bound};
+    in.map = {&s_.sensor, s_.r, c.existence, c.sensor.max_range, c.sensor.field_of_view, scan_step};
     in.scan_step = scan_step;
     in.record = c.record_trajectory && !s_.pending.empty();
     return in;
@@ -123,13 +123,12 @@ class ParticlePass final : public Pass {
     s_.pending.clear();
   }
 
-  void run_block(const PassInputs& in, const std::vector<PlannedObservation>* scan,
-                 std::size_t t, std::size_t begin, std::size_t end, PassScratch& scratch) {
+  void run_block(const PassInputs& in, const std::vector<PlannedObservation>* scan, std::size_t t,
+                 std::size_t begin, std::size_t end, PassScratch& scratch) {
     const Clock::time_point t0 = Clock::now();
     if (!in.motion.pending.empty()) {
-      advance_block<Motion, kFs2>(motion_, in.motion, s_.store, s_.covariances, begin,
-                                  end - begin, in.record ? recorder_.buffer() : nullptr,
-                                  scratch.motion);
+      advance_block<Motion, kFs2>(motion_, in.motion, s_.store, s_.covariances, begin, end - begin,
+                                  in.record ? recorder_.buffer() : nullptr, scratch.motion);
     }
     const Clock::time_point t1 = Clock::now();
     double associate_seconds = 0.0;
@@ -139,8 +138,7 @@ class ParticlePass final : public Pass {
         // The N normals of each particle's pose draw, stream (seed, scan step, particle,
         // kProposal), for the whole block in one vectorised batch.
         scratch.draws.resize(static_cast<std::size_t>(N) * (end - begin));
-        parallel::normals_for_particles(s_.config.seed, in.scan_step,
-                                        parallel::Purpose::kProposal,
+        parallel::normals_for_particles(s_.config.seed, in.scan_step, parallel::Purpose::kProposal,
                                         static_cast<std::uint32_t>(begin), end - begin, N,
                                         scratch.draws);
       }
@@ -210,7 +208,8 @@ class ParticlePass final : public Pass {
       log_w = associate_sampling(scratch.search.candidates, log_p0, stream, chosen, scratch.taken);
     }
     if constexpr (kFs2) {
-      const Fs2Draw<N> d = fold_and_draw<N>(s_.sensor, s_.r, log_p0, prior, map, scan, chosen, draw);
+      const Fs2Draw<N> d =
+          fold_and_draw<N>(s_.sensor, s_.r, log_p0, prior, map, scan, chosen, draw);
       // Under ML the weight is the chain of the folds' terms; under DAS it stays the product
       // of the normalisers.
       if constexpr (kMl) log_w = d.folded;

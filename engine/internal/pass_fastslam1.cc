@@ -17,8 +17,8 @@ std::unique_ptr<Pass> make_fastslam1_pass(FilterState& state,
       return std::make_unique<ParticlePass<Motion, false, Association::kMaximumLikelihood>>(
           motion, state, kernel, recorder);
     }
-    return std::make_unique<ParticlePass<Motion, false, Association::kDataAssociationSampling>>(motion, state,
-                                                                               kernel, recorder);
+    return std::make_unique<ParticlePass<Motion, false, Association::kDataAssociationSampling>>(
+        motion, state, kernel, recorder);
   });
 }
 

@@ -17,8 +17,8 @@ std::unique_ptr<Pass> make_fastslam2_pass(FilterState& state,
       return std::make_unique<ParticlePass<Motion, true, Association::kMaximumLikelihood>>(
           motion, state, kernel, recorder);
     }
-    return std::make_unique<ParticlePass<Motion, true, Association::kDataAssociationSampling>>(motion, state,
-                                                                               kernel, recorder);
+    return std::make_unique<ParticlePass<Motion, true, Association::kDataAssociationSampling>>(
+        motion, state, kernel, recorder);
   });
 }
 

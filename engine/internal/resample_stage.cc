@@ -43,8 +43,7 @@ void ResampleStage::run(FilterState& state, std::uint64_t scan_step, bool heavy)
     ++counters.weight_resets;
     counters.log_evidence = -std::numeric_limits<double>::infinity();
   }
-  counters.resample_seconds +=
-      std::chrono::duration<double>(Clock::now() - t0).count();
+  counters.resample_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
 }  // namespace fastslam::engine::internal

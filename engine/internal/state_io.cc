@@ -145,8 +145,7 @@ void get_columns(std::istream& in, memory::ParticleStore& store) {
 // placeholders fill the holes and are erased afterwards. Known association: every map holds
 // exactly the K known slots. Unknown: any count, and holes (removed landmarks) of at most
 // kMaxHoles in all, so a corrupt slot cannot make the load allocate without bound.
-void get_map(std::istream& in, bool known_ids, std::size_t known_count,
-             memory::LandmarkTree& map) {
+void get_map(std::istream& in, bool known_ids, std::size_t known_count, memory::LandmarkTree& map) {
   const auto count = get<std::uint64_t>(in);
   if (known_ids ? count != known_count : count > kLimit) corrupt("map size");
   constexpr std::uint64_t kMaxHoles = std::uint64_t{1} << 24;
@@ -184,8 +183,8 @@ void save_state(const FilterState& s, const std::vector<TrajectoryPoint>& trajec
 #endif
   put(out, config);
   const FilterCounters& c = s.counters;
-  for (std::uint64_t v : {c.step, c.controls, c.scans, c.observations, c.resamples,
-                          c.weight_resets}) {
+  for (std::uint64_t v :
+       {c.step, c.controls, c.scans, c.observations, c.resamples, c.weight_resets}) {
     put(out, v);
   }
   put(out, s.landmark_variance_bound);
@@ -223,8 +222,8 @@ StateHeader read_header(std::istream& in) {
   StateHeader h;
   h.config = get_config(in);
   FilterCounters& c = h.counters;
-  for (std::uint64_t* v : {&c.step, &c.controls, &c.scans, &c.observations, &c.resamples,
-                           &c.weight_resets}) {
+  for (std::uint64_t* v :
+       {&c.step, &c.controls, &c.scans, &c.observations, &c.resamples, &c.weight_resets}) {
     *v = get<std::uint64_t>(in);
   }
   h.variance_bound = get<double>(in);

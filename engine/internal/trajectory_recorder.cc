@@ -35,8 +35,8 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
         [](const Sums& a, const Sums& b) {
           return Sums{a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3], a[4] + b[4]};
         });
-    points_.push_back({first_control + k, sums[1] / sums[0], sums[2] / sums[0],
-                       std::atan2(sums[4], sums[3])});
+    points_.push_back(
+        {first_control + k, sums[1] / sums[0], sums[2] / sums[0], std::atan2(sums[4], sums[3])});
   }
 }
 

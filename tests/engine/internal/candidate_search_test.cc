@@ -42,8 +42,14 @@ struct World {
     for (int k = 0; k < 400; ++k) {
       const double cx = 25 * u(rng), cy = 25 * u(rng);
       const double s = 0.02 + 0.3 * (1 + u(rng));
-      memory::Landmark l{cx, cy, s, 0.3 * s * u(rng), s * (0.5 + 0.5 * (1 + u(rng))), 1.0,
-                         static_cast<std::uint64_t>(k), 0};
+      memory::Landmark l{cx,
+                         cy,
+                         s,
+                         0.3 * s * u(rng),
+                         s * (0.5 + 0.5 * (1 + u(rng))),
+                         1.0,
+                         static_cast<std::uint64_t>(k),
+                         0};
       const memory::Slot slot = map.insert(l);
       index.insert(slot, l.x, l.y, largest_variance(l));
       in.variance_bound = std::max(in.variance_bound, static_cast<double>(largest_variance(l)));

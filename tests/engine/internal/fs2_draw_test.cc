@@ -47,8 +47,8 @@ struct World {
 TEST(Fs2DrawTest, NoChoiceDrawsFromThePrior) {
   World w;
   const std::vector<std::int64_t> none(w.scan.size(), kNewLandmark);
-  const Fs2Draw<5> d = fold_and_draw<5>(w.sensor, w.r, -7.0, w.prior, w.map, w.scan, none,
-                                        w.normals);
+  const Fs2Draw<5> d =
+      fold_and_draw<5>(w.sensor, w.r, -7.0, w.prior, w.map, w.scan, none, w.normals);
   Eigen::Matrix<double, 5, 5> rest;
   const Eigen::Matrix<double, 5, 1> s = draw_state<5>(w.prior, w.normals, rest);
   EXPECT_EQ(d.state, s);
@@ -58,8 +58,8 @@ TEST(Fs2DrawTest, NoChoiceDrawsFromThePrior) {
 
 TEST(Fs2DrawTest, FoldsMatchTheLaneKernels) {
   World w;
-  const Fs2Draw<5> d = fold_and_draw<5>(w.sensor, w.r, -7.0, w.prior, w.map, w.scan, w.chosen,
-                                        w.normals);
+  const Fs2Draw<5> d =
+      fold_and_draw<5>(w.sensor, w.r, -7.0, w.prior, w.map, w.scan, w.chosen, w.normals);
   // One lane (padded to a group) through the lane kernels.
   constexpr std::size_t kLanes = 8;
   std::vector<double> columns((5 + 15 + 6) * kLanes, 0.0);
@@ -99,7 +99,8 @@ TEST(Fs2DrawTest, FoldsMatchTheLaneKernels) {
   PoseGaussian<5> proposal;
   for (int k = 0; k < 5; ++k) proposal.mean[k] = lanes.mean[k][0];
   for (int row = 0, e = 0; row < 5; ++row) {
-    for (int c = row; c < 5; ++c, ++e) proposal.cov(row, c) = proposal.cov(c, row) = lanes.cov[e][0];
+    for (int c = row; c < 5; ++c, ++e)
+      proposal.cov(row, c) = proposal.cov(c, row) = lanes.cov[e][0];
   }
   Eigen::Matrix<double, 5, 5> rest;
   const Eigen::Matrix<double, 5, 1> s = draw_state<5>(proposal, w.normals, rest);

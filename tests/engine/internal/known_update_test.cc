@@ -137,9 +137,8 @@ void expect_proposal_matches_scalar() {
     for (const PlannedObservation& o : w.scan) {
       if (o.is_new) continue;
       double term = 0.0;
-      proposal = fold_observation<N>(w.sensor, proposal,
-                                     to_gaussian(start.store.map(i).at(o.slot)), o.z, w.in.r,
-                                     &term);
+      proposal = fold_observation<N>(w.sensor, proposal, to_gaussian(start.store.map(i).at(o.slot)),
+                                     o.z, w.in.r, &term);
       log_w += term;
     }
     Eigen::Matrix<double, N, N> rest;

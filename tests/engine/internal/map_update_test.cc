@@ -61,8 +61,14 @@ struct World {
     in.scan_step = 33;
     for (int k = 0; k < 300; ++k) {
       // log-odds 0.2..1.8: a miss removes some, keeps others.
-      const memory::Landmark l{20 * u(rng), 20 * u(rng), 0.05, 0.0, 0.05, 1.0 + 0.8 * u(rng),
-                               static_cast<std::uint64_t>(k), 4};
+      const memory::Landmark l{20 * u(rng),
+                               20 * u(rng),
+                               0.05,
+                               0.0,
+                               0.05,
+                               1.0 + 0.8 * u(rng),
+                               static_cast<std::uint64_t>(k),
+                               4};
       const memory::Slot slot = map.insert(l);
       index.insert(slot, l.x, l.y, largest_variance(l));
       oracle[slot] = l;

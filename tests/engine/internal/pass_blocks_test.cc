@@ -25,8 +25,8 @@ TEST(PassBlocksTest, BlocksTileTheParticlesInWholeGroups) {
           for (std::size_t t = 0; t < b.tasks; ++t) {
             ASSERT_LT(b.begin(t), b.begin(t + 1)) << m << " " << threads << " " << grain;
             EXPECT_EQ(b.begin(t) % kMotionLanes, 0u);
-            const std::size_t g = (std::min(m, b.begin(t + 1)) - b.begin(t) + kMotionLanes - 1) /
-                                  kMotionLanes;
+            const std::size_t g =
+                (std::min(m, b.begin(t + 1)) - b.begin(t) + kMotionLanes - 1) / kMotionLanes;
             smallest = std::min(smallest, g);
             largest = std::max(largest, g);
           }

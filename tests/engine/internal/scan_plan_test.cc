@@ -2,11 +2,11 @@
 // in order of first appearance; and every refusal of predict, observe and set_map.
 #include "engine/internal/scan_plan.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <numeric>
-#include <algorithm>
 #include <random>
 #include <stdexcept>
 #include <vector>
@@ -61,13 +61,12 @@ TEST(ScanPlanTest, UnknownAssociationKeepsMeasurementsOnly) {
 
 TEST(ScanPlanTest, RefusesBadObservations) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  for (const Observation& bad : {Observation{0.0, 0.0, 1}, Observation{-1.0, 0.0, 1},
-                                 Observation{nan, 0.0, 1}, Observation{1.0, nan, 1},
-                                 Observation{1.0, std::numeric_limits<double>::infinity(), 1}}) {
+  for (const Observation& bad :
+       {Observation{0.0, 0.0, 1}, Observation{-1.0, 0.0, 1}, Observation{nan, 0.0, 1},
+        Observation{1.0, nan, 1}, Observation{1.0, std::numeric_limits<double>::infinity(), 1}}) {
     const std::vector<Observation> scan = {{1.0, 0.0, 0}, bad};
     EXPECT_THROW(plan_scan(scan, Association::kKnown, {}), std::invalid_argument);
-    EXPECT_THROW(plan_scan(scan, Association::kDataAssociationSampling, {}),
-                 std::invalid_argument);
+    EXPECT_THROW(plan_scan(scan, Association::kDataAssociationSampling, {}), std::invalid_argument);
   }
   const std::vector<Observation> negative = {{1.0, 0.0, -3}};
   EXPECT_THROW(plan_scan(negative, Association::kKnown, {}), std::invalid_argument);

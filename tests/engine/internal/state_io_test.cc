@@ -105,8 +105,8 @@ TEST(StateIoTest, CorruptStreamsFail) {
   fill(s);
   const std::string bytes = save(s, {});
   std::vector<TrajectoryPoint> unused;
-  for (std::size_t cut : {std::size_t{0}, std::size_t{7}, std::size_t{40}, bytes.size() / 2,
-                          bytes.size() - 1}) {
+  for (std::size_t cut :
+       {std::size_t{0}, std::size_t{7}, std::size_t{40}, bytes.size() / 2, bytes.size() - 1}) {
     EXPECT_THROW(round_trip(bytes.substr(0, cut), &unused), std::runtime_error) << cut;
   }
   std::string bad_magic = bytes;
