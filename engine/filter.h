@@ -1,50 +1,17 @@
-// The Filter API that embedders call: FastSLAM 1.0 (paper section 4, table 1) and 2.0 (section
-// 5, table 2) over M particles, each with its own persistent map (memory/landmark_tree.h).
-//
-// Use: construct from a `FilterConfig`; feed it `predict(control, dt)` for every odometry
-// sample and `observe(scan)` for every scan, in time order; read `estimate()` (the weighted-mean
-// and best pose, and the best particle's map with covariances) and `statistics()` whenever you
-// like; `save` and `load` the whole state (a restored filter continues bit-identically).
-//
-// How a step runs. `predict` validates the control and queues it; `observe` then runs ONE
-// parallel pass over blocks of particles that carries each block through every queued control
-// and the scan (a dispatch per control step would cost more than the work at M = 100), and
-// then resamples by the configured policy. FastSLAM 1.0 samples each control's motion noise;
-// 2.0 propagates the motion mean and covariance between scans and draws the pose once, from
-// the proposal folded over all the observations of the scan (without odometry the velocities
-// are not drawn: each particle keeps their Gaussian given its pose, engine/proposal.h
-// draw_state). Randomness comes from the keyed
-// streams of parallel/random_stream.h (seed, step, particle, purpose), so results are
-// bit-identical for any thread count and grain, and do not depend on when the queue is drained.
-//
-// Data association. With known ids (`Association::kKnown`) every particle holds the same
-// landmarks in the same slots. Unknown association (ML, eq. 64, or DAS, eq. 65) is per particle:
-// each particle keeps a spatial index over its map (memory/spatial_index.h, persistent like the
-// map), finds each observation's candidates by a disc query around the landmark position the
-// observation implies (radius from the Mahalanobis gate, so never a scan of the map), gates
-// them, and chooses for the whole scan at once with mutual exclusion (engine/association.h);
-// "new" has likelihood p0 (config.log_new_landmark). FastSLAM 2.0 scores candidates with the
-// pose integrated out (eq. 60-61), folds the chosen ones into its proposal and draws the pose
-// once. Then, per particle: the chosen landmarks are updated and moved in the index; every
-// landmark inside the sensor's footprint (spatial query) and not chosen loses existence
-// log-odds and is removed below the bound (eq. 73-75, config.existence); new landmarks get ids
-// (scan step) * 2^20 + (observation index).
-//
-// Bad input (NaN or infinite values, a negative or zero range, dt < 0, a missing or repeated id
-// in known-association mode) throws std::invalid_argument naming what is wrong and leaves the
-// filter exactly as it was.
-//
-// Ownership: the filter owns its particles, maps, node heap and threads (a TBB arena of
-// `config.threads`). `observe` borrows the scan for the call only.
-// Thread safety: thread-compatible: one call at a time; the filter runs its own parallel work
-// (with two or more threads and steps too light to split, a task of its own may still be
-// drawing the next step's motion noise after observe returns; it touches only the filter's
-// internals and the destructor waits for it).
-// Costs (M particles, K queued controls, Z observations in the scan, N landmarks per map, k
-// candidates and landmarks in view per particle): `predict` O(1) amortised; `observe`
-// O(M (K + Z log N)) work with known ids, O(M (K + (Z + k) log N + Z k)) unknown, spread over
-// the threads, plus resampling O(M); `estimate` O(M + N) (it copies the best map out); `save` O(M
-// N) worst case (maps that share a root are written once).
+// The FastSLAM 1.0 / 2.0 filter that embedders call (paper sections 4-5): M particles, each with
+// its own persistent map. Feed it `predict(control, dt)` for every odometry sample and
+// `observe(scan)` for every scan, in time order; read `estimate()` and `statistics()` whenever
+// you like; `save` and `load` the whole state (a restored filter continues bit-identically).
+// Results are bit-identical for any thread count and grain. Bad input (non-finite values, a
+// range <= 0, dt < 0, a missing or repeated id with known ids) throws std::invalid_argument and
+// leaves the filter as it was. Owns its particles, maps, node heap and threads (a TBB arena of
+// `config.threads`); `observe` borrows the scan for the call. Thread-compatible: one call at a
+// time (a background task of its own may still run after `observe` returns; it touches only the
+// filter's internals and the destructor waits for it). Costs (M particles, K queued controls, Z
+// observations, N landmarks a map, k candidates and landmarks in view a particle): `predict`
+// O(1) amortised; `observe` O(M (K + Z log N)) with known ids, O(M (K + (Z + k) log N + Z k))
+// unknown, plus O(M) resampling; `estimate` O(M + N); `save` O(M N) worst case.
+// docs/engine.md describes the algorithm and the stages a step runs through.
 #pragma once
 
 #include <cstdint>

@@ -8,14 +8,14 @@
 #include "engine/angles.h"
 #include "engine/landmark_ekf.h"
 #include "engine/proposal.h"
-#include "parallel/internal/vmath.h"
+#include "parallel/vector_math.h"
 
 namespace fastslam::engine {
 namespace {
 
-using parallel::internal::arctan2;
-using parallel::internal::log_positive;
-using parallel::internal::select;
+using parallel::arctan2;
+using parallel::log_positive;
+using parallel::select;
 
 // Lanes per pass of the vector loop: bounds the stack flags of the lanes that fall back.
 constexpr std::size_t kChunk = 64;
@@ -49,7 +49,7 @@ template <bool kOffset>
   if constexpr (kOffset) {
     double c = 0.0;
     double s = 0.0;
-    parallel::internal::sincos(th, c, s);
+    parallel::sincos(th, c, s);
     t.sx = t.sx + (off.x * c - off.y * s);
     t.sy = t.sy + (off.x * s + off.y * c);
   }

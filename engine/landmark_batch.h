@@ -1,32 +1,14 @@
 // The per-observation math of a scan applied to many particles at once, over structure-of-arrays
-// lanes, so that the compiler vectorises across particles. With known data association every
-// particle of a block observes the same landmark slot at once: the filter gathers that landmark
-// of each particle into lanes, calls the kernel, and scatters the result back (the tree edits
-// stay scalar). Two kernels:
-//   update_landmark_lanes   the landmark EKF of engine/landmark_ekf.h (evaluate_observation +
-//                           apply_update, eq. 25, 31, 32) and the FastSLAM 1.0 weight term;
-//   fold_proposal_lanes     FastSLAM 2.0: one observation folded into each lane's pose proposal
-//                           (engine/proposal.h: evaluate_proposal + fold, eq. 42-49, 60-61) and
-//                           its weight term; sample_pose_lanes then draws each lane's pose
-//                           (proposal.h's sample_pose).
-//
-// Each lane equals the scalar functions up to rounding: atan2 and log are
-// parallel/internal/vmath.h's (below 2 ulp and 1 ulp) instead of libm's, the sensor's sine and
-// cosine (with an offset) too, and the bearing is wrapped in two exact steps;
-// tests/engine/landmark_batch_test.cc bounds the difference. A lane whose inputs leave the vector
-// path's domain (landmark at the sensor, a non-positive innovation determinant, a heading beyond a
-// few turns, non-finite values) is recomputed by the scalar functions (engine/landmark_ekf.h,
-// engine/proposal.h).
-//
-// Determinism: a lane's result depends on that lane's inputs alone, not on `lanes` or the
-// lane's position: the file is compiled without floating-point contraction (every product is
-// rounded, fma only where vmath.h's madd says so), and whether a lane falls back depends on its
-// inputs alone. So the filter stays bit-identical for any thread count and grain.
-//
-// Layout: every column holds `lanes` doubles; lane l is entry l of each. Columns must not
-// overlap. Thread safety: pure functions of their arguments; concurrent calls on disjoint columns
-// are safe. Costs: O(lanes); update_landmark_lanes about 120 flops, five divisions and a square
-// root per lane, fold_proposal_lanes O(N^3) more for the N x N proposal; no allocation.
+// lanes, so that the compiler vectorises across particles: update_landmark_lanes (the landmark
+// EKF of engine/landmark_ekf.h and the FastSLAM 1.0 weight term), fold_proposal_lanes and
+// sample_pose_lanes (FastSLAM 2.0's proposal fold and pose draw, engine/proposal.h). Each lane
+// equals the scalar functions up to rounding (atan2, log, sine and cosine are
+// parallel/vector_math.h's; tests/engine/landmark_batch_test.cc bounds the difference); a lane
+// whose inputs leave the vector path's domain is recomputed by the scalar functions. A lane's
+// result depends on its own inputs alone (the file is compiled without contraction), so the
+// filter is bit-identical for any thread count and grain. Every column holds `lanes` doubles;
+// columns must not overlap. Thread safety: pure functions; concurrent calls on disjoint columns
+// are safe. Costs: O(lanes) (O(N^3) a lane for an N x N proposal); no allocation.
 #pragma once
 
 #include <cstddef>

@@ -1,0 +1,59 @@
+// The state of a Filter that outlives a call: configuration, node heap, particles and their maps,
+// FastSLAM 2.0 covariances, the queue of controls, the known-id table and the counters. The
+// stages read and change it; the Filter facade (engine/filter.cc) owns it, and state_io.h saves
+// and loads it. Thread safety: thread-compatible; the passes change disjoint particles
+// concurrently and `phase_times` per thread. Costs: construction O(M).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <oneapi/tbb/combinable.h>
+
+#include "engine/filter_config.h"
+#include "engine/internal/pose_covariance.h"
+#include "engine/internal/scan_plan.h"
+#include "engine/measurement_model.h"
+#include "memory/node_heap.h"
+#include "memory/particle_store.h"
+
+namespace fastslam::engine::internal {
+
+// Per-thread time and counts of the passes (FilterStatistics sums them).
+struct PhaseTimes {
+  double predict = 0.0;
+  double associate = 0.0;
+  double update = 0.0;
+  std::uint64_t created = 0;  // landmarks started, summed over particles
+  std::uint64_t removed = 0;  // landmarks removed by negative information
+};
+
+struct FilterCounters {
+  std::uint64_t step = 0;  // events so far (controls and scans): keys the random streams
+  std::uint64_t controls = 0, scans = 0, observations = 0, resamples = 0, weight_resets = 0;
+  double resample_seconds = 0.0;
+  double log_evidence = 0.0;
+  double observe_wall_seconds = 0.0;
+};
+
+struct FilterState {
+  // REQUIRES: validate(config) passed.
+  explicit FilterState(const FilterConfig& c);
+
+  FilterConfig config;
+  memory::PoolHeap heap;  // before the store: outlives every map
+  memory::ParticleStore store;
+  PoseCovariances covariances;
+  RangeBearingModel sensor;
+  Eigen::Matrix2d r;  // the measurement noise
+  std::vector<PendingControl> pending;
+  KnownSlots known_slots;
+  // Unknown association: a bound on every landmark covariance's largest eigenvalue (the largest
+  // of eq. 70 over the observations seen so far, and of set_map's), for the candidate search.
+  double landmark_variance_bound = 0.0;
+  FilterCounters counters;
+  mutable tbb::combinable<PhaseTimes> phase_times;  // combine_each is not const
+};
+
+}  // namespace fastslam::engine::internal

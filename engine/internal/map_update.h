@@ -1,0 +1,87 @@
+// The map update of unknown association, for one particle after its scan's association: the
+// chosen landmarks get their EKF update at the particle's (drawn) pose and their index entries
+// move with their means; every landmark in the sensor's footprint that was not chosen loses
+// existence log-odds and is removed below the bound (negative information, eq. 73-75); then the
+// new landmarks enter the map and the index, with ids (scan step) * 2^20 + (observation index).
+// This is the one place where the unknown-id pass changes a particle's tree and its spatial index,
+// and keeps them in step (an index entry is its landmark's slot, mean and largest covariance
+// eigenvalue, `largest_variance`).
+// Thread safety: writes only the particle's map and index; concurrent calls on distinct
+// particles with distinct scratch are safe. Costs: O((Z + k) log N) for Z observations and k
+// landmarks in view, plus O(k log k) to order them; no allocation once the scratch has grown,
+// beyond the maps' path copies.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "engine/filter_config.h"
+#include "engine/internal/scan_plan.h"
+#include "engine/landmark_ekf.h"
+#include "engine/measurement_model.h"
+#include "engine/pose.h"
+#include "memory/landmark_tree.h"
+#include "memory/spatial_index.h"
+
+namespace fastslam::engine::internal {
+
+// The largest eigenvalue of a stored landmark's covariance, rounded up to a float: its spatial
+// index entry's extent, which gates candidates before the map is read (candidate_search.h).
+float largest_variance(const memory::Landmark& l);
+
+// The map update's per-thread buffers.
+struct MapUpdateScratch {
+  std::vector<memory::Slot> touched;
+  std::vector<memory::SpatialEntry> in_view;
+};
+
+// What the map update reads besides the particle.
+struct MapUpdateInput {
+  const RangeBearingModel* sensor = nullptr;
+  Eigen::Matrix2d r;
+  ExistenceConfig existence;
+  double max_range = 0.0;
+  double field_of_view = 0.0;
+  std::uint64_t scan_step = 0;
+};
+
+// Landmarks the update started and removed.
+struct MapUpdateCounts {
+  std::uint64_t created = 0;
+  std::uint64_t removed = 0;
+};
+
+// One particle's map update. assignment[j]: observation j's slot or kNewLandmark. FastSLAM 1.0
+// (kFs2 false) reuses the association's EKF terms, terms[chosen_terms[j]] (same pose, same
+// landmark, since no other observation takes it); 2.0 evaluates them at the drawn `pose`.
+template <bool kFs2>
+void update_particle_map(const MapUpdateInput& in, const Pose& pose,
+                         const std::vector<PlannedObservation>& scan,
+                         std::span<const std::int64_t> assignment,
+                         std::span<const LandmarkObservation> terms,
+                         std::span<const std::uint32_t> chosen_terms, memory::LandmarkTree& map,
+                         memory::SpatialIndex& index, MapUpdateScratch& scratch,
+                         MapUpdateCounts& counts);
+
+extern template void update_particle_map<false>(const MapUpdateInput&, const Pose&,
+                                                const std::vector<PlannedObservation>&,
+                                                std::span<const std::int64_t>,
+                                                std::span<const LandmarkObservation>,
+                                                std::span<const std::uint32_t>,
+                                                memory::LandmarkTree&, memory::SpatialIndex&,
+                                                MapUpdateScratch&, MapUpdateCounts&);
+extern template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
+                                               const std::vector<PlannedObservation>&,
+                                               std::span<const std::int64_t>,
+                                               std::span<const LandmarkObservation>,
+                                               std::span<const std::uint32_t>,
+                                               memory::LandmarkTree&, memory::SpatialIndex&,
+                                               MapUpdateScratch&, MapUpdateCounts&);
+
+// A landmark tree's spatial index, built entry by entry in slot order.
+void index_map(const memory::LandmarkTree& map, memory::SpatialIndex& index);
+
+}  // namespace fastslam::engine::internal

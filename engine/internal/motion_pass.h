@@ -1,0 +1,141 @@
+// The motion stage of a pass: the queued controls applied to one block of particles. The block's
+// states (and, for FastSLAM 2.0, the upper triangles of its state covariances) are copied into
+// the thread's lane columns, padded to whole groups of kMotionLanes, carried through every
+// control by the vectorised kernels of engine/motion_batch.h (1.0: sample_block with the keyed
+// motion normals, taken from the ahead window where it holds them; 2.0: predict_block), and
+// copied back. With a trajectory buffer it also writes x, y, cos, sin per control and particle.
+// Thread safety: concurrent calls on disjoint blocks with distinct scratch are safe. Costs:
+// O(count K) for K queued controls; no allocation once the scratch has grown.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "engine/internal/motion_normals_ahead.h"
+#include "engine/internal/pose_covariance.h"
+#include "engine/internal/scan_plan.h"
+#include "engine/motion_batch.h"
+#include "memory/particle_store.h"
+#include "parallel/random_stream.h"
+#include "parallel/vector_math.h"
+
+namespace fastslam::engine::internal {
+
+// The motion stage's per-thread buffers.
+struct MotionScratch {
+  std::vector<double> columns;
+  std::vector<ControlStep> steps;
+  std::vector<std::uint64_t> keys;
+};
+
+// What the motion stage reads besides the particles.
+struct MotionInput {
+  std::span<const PendingControl> pending;
+  std::uint64_t seed = 0;
+  double sigma_control[2] = {0.0, 0.0};
+  const MotionNormalsWindow* ahead = nullptr;  // FastSLAM 1.0: normals drawn ahead (may be empty)
+};
+
+namespace motion_pass_detail {
+
+// Batches of at most kStepBatch controls bound the scratch when many controls are queued.
+inline constexpr std::size_t kStepBatch = 64;
+
+// FastSLAM 1.0: the two motion normals of every lane and step of one batch, stream (seed, step,
+// particle, kMotion), step j's pair in normals[2 j lanes, ...). Drawn for the padding lanes too
+// (the streams of the particles after the block; their values go nowhere): whole vectors.
+inline void draw_motion_normals(const MotionInput& in, std::span<const std::uint64_t> keys,
+                                std::size_t begin, std::size_t lanes, std::span<double> normals) {
+  const std::size_t drawn = in.ahead->copy(keys, begin, lanes, normals);
+  if (drawn < keys.size()) {
+    const std::span<double> rest = normals.subspan(2 * drawn * lanes);
+    parallel::normal_pairs_for_particles(in.seed, keys.subspan(drawn), parallel::Purpose::kMotion,
+                                         static_cast<std::uint32_t>(begin), lanes, rest,
+                                         rest.subspan(lanes), 2 * lanes);
+  }
+}
+
+// x, y, cos, sin of lanes [0, count) after control k, at recorded[(k m + begin + l) * 4].
+template <int N>
+void record_poses(const StateBlock<N>& block, std::size_t k, std::size_t m, std::size_t begin,
+                  std::size_t count, double* recorded) {
+  for (std::size_t l = 0; l < count; ++l) {
+    double* out = &recorded[(k * m + begin + l) * 4];
+    out[0] = block.col[0][l];
+    out[1] = block.col[1][l];
+    parallel::sincos(block.col[2][l], out[2], out[3]);
+  }
+}
+
+}  // namespace motion_pass_detail
+
+// Applies in.pending to particles [begin, begin + count) of `store` (and, for 2.0, their
+// covariances). `recorded` is null unless the trajectory is recorded (m * 4 doubles a control).
+template <class Motion, bool kFs2>
+void advance_block(const Motion& motion, const MotionInput& in, memory::ParticleStore& store,
+                   PoseCovariances& covariances, std::size_t begin, std::size_t count,
+                   double* recorded, MotionScratch& scratch) {
+  using motion_pass_detail::kStepBatch;
+  constexpr int N = Motion::kStateDim;
+  constexpr int E = kCovEntries<N>;
+  const typename Motion::Control sigmas(in.sigma_control[0], in.sigma_control[1]);
+  const std::size_t lanes = padded_lanes(count);
+  const std::size_t k_steps = in.pending.size();
+  // Columns: N states, then (2.0) E covariance entries or (1.0) two normals per step of a batch.
+  const std::size_t columns = N + (kFs2 ? E : 2 * std::min(k_steps, kStepBatch));
+  scratch.columns.resize(columns * lanes);
+  auto column = [&](std::size_t c) { return scratch.columns.data() + c * lanes; };
+  scratch.steps.resize(k_steps);
+  scratch.keys.resize(k_steps);
+  for (std::size_t k = 0; k < k_steps; ++k) {
+    const PendingControl& c = in.pending[k];
+    scratch.steps[k] = {c.u0, c.u1, c.dt};
+    if constexpr (Motion::kNoOdometry) scratch.steps[k].u0 = scratch.steps[k].u1 = 0;
+    scratch.keys[k] = c.step;
+  }
+  double* const store_col[5] = {store.x().data(), store.y().data(), store.theta().data(),
+                                store.v().data(), store.omega().data()};
+  StateBlock<N> block;
+  block.lanes = lanes;
+  for (int k = 0; k < N; ++k) {
+    block.col[k] = column(k);
+    std::copy_n(store_col[k] + begin, count, block.col[k]);
+    std::fill(block.col[k] + count, block.col[k] + lanes, 0.0);  // padding lanes: any finite
+  }
+  CovBlock<N> cov{};
+  if constexpr (kFs2) {
+    for (int e = 0; e < E; ++e) cov[e] = column(N + e);
+    covariances.load_upper<N>(begin, count, cov.data());
+    for (int e = 0; e < E; ++e) std::fill(cov[e] + count, cov[e] + lanes, 0.0);
+  }
+  const std::size_t m = store.size();
+  // Recording the trajectory needs the poses after every step; otherwise one call runs a batch.
+  const std::size_t per_call = recorded != nullptr ? 1 : kStepBatch;
+  for (std::size_t first = 0; first < k_steps; first += kStepBatch) {
+    const std::size_t batch = std::min(kStepBatch, k_steps - first);
+    if constexpr (!kFs2) {
+      motion_pass_detail::draw_motion_normals(in, std::span(scratch.keys).subspan(first, batch),
+                                              begin, lanes,
+                                              std::span(column(N), 2 * batch * lanes));
+    }
+    for (std::size_t j = 0; j < batch; j += per_call) {
+      const std::size_t k = first + j;
+      const std::span<const ControlStep> run(scratch.steps.data() + k,
+                                             std::min(per_call, batch - j));
+      if constexpr (kFs2) {
+        predict_block(motion, block, run, sigmas, cov);
+      } else {
+        sample_block(motion, block, run, sigmas, column(N + 2 * j));
+      }
+      if (recorded != nullptr)
+        motion_pass_detail::record_poses(block, k, m, begin, count, recorded);
+    }
+  }
+  for (int k = 0; k < N; ++k) std::copy_n(block.col[k], count, store_col[k] + begin);
+  if constexpr (kFs2) covariances.store_upper<N>(begin, count, cov.data());
+}
+
+}  // namespace fastslam::engine::internal

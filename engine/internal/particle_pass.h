@@ -1,0 +1,247 @@
+// ParticlePass<Motion, kFs2, kAssociation>: one algorithm's pass (pass.h), its stages fixed at
+// compile time. Per block (pass_blocks.h) it runs the motion stage, then the scan's stages; the
+// per-thread buffers come from the kernel (parallel::ThreadScratch), one set per thread and
+// filter. The factories at the end are defined in one source file per algorithm family, so the
+// instantiations compile in parallel. Thread safety and costs: as pass.h.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <numeric>
+#include <span>
+#include <vector>
+
+#include "engine/association.h"
+#include "engine/internal/candidate_search.h"
+#include "engine/internal/filter_state.h"
+#include "engine/internal/fs2_draw.h"
+#include "engine/internal/known_update.h"
+#include "engine/internal/map_update.h"
+#include "engine/internal/motion_normals_ahead.h"
+#include "engine/internal/motion_pass.h"
+#include "engine/internal/pass.h"
+#include "engine/internal/pass_blocks.h"
+#include "engine/internal/trajectory_recorder.h"
+#include "parallel/particle_kernel.h"
+#include "parallel/random_stream.h"
+
+namespace fastslam::engine::internal {
+
+// One thread's buffers for every stage of a pass.
+struct PassScratch {
+  MotionScratch motion;
+  std::vector<double> draws;  // FastSLAM 2.0: N normals per particle of the block
+  KnownScratch known;
+  CandidateScratch search;
+  std::vector<std::int64_t> assignment;     // observation j: a slot or kNewLandmark
+  std::vector<std::uint32_t> chosen_terms;  // 1.0: observation j's terms in search.terms
+  std::vector<memory::Slot> taken;          // DAS scratch
+  MapUpdateScratch map;
+};
+
+// The stages' inputs of one pass.
+struct PassInputs {
+  MotionInput motion;
+  KnownInput known;
+  SearchInput search;
+  MapUpdateInput map;
+  std::uint64_t scan_step = 0;
+  bool record = false;
+};
+
+template <class Motion, bool kFs2, Association kAssociation>
+class ParticlePass final : public Pass {
+ public:
+  ParticlePass(const Motion& motion, FilterState& state, const parallel::ParticleKernel& kernel,
+               TrajectoryRecorder& recorder)
+      : motion_(motion),
+        s_(state),
+        kernel_(kernel),
+        recorder_(recorder),
+        ahead_(kernel, state.config.seed) {}
+  ~ParticlePass() noexcept override = default;
+  ParticlePass(const ParticlePass&) = delete;
+  ParticlePass& operator=(const ParticlePass&) = delete;
+
+  void drain() override { run(nullptr, 0); }
+  void observe(const std::vector<PlannedObservation>& scan, std::uint64_t scan_step) override {
+    run(&scan, scan_step);
+  }
+
+ private:
+  static constexpr int N = Motion::kStateDim;
+  static constexpr bool kKnown = kAssociation == Association::kKnown;
+  static constexpr bool kMl = kAssociation == Association::kMaximumLikelihood;
+  using Clock = std::chrono::steady_clock;
+  using State = typename Motion::State;
+
+  static double seconds_between(Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double>(b - a).count();
+  }
+
+  PassInputs inputs(std::uint64_t scan_step) const {
+    const FilterConfig& c = s_.config;
+    PassInputs in;
+    in.motion.pending = s_.pending;
+    in.motion.seed = c.seed;
+    in.motion.sigma_control[0] = c.motion.sigma_control[0];
+    in.motion.sigma_control[1] = c.motion.sigma_control[1];
+    in.motion.ahead = &ahead_.ready();
+    in.known = {&s_.sensor, s_.r, c.existence, scan_step};
+    in.search = {&s_.sensor,         s_.r,
+                 c.gating.gate,      c.gating.search_scale,
+                 c.log_new_landmark, s_.landmark_variance_bound};
+    in.map = {&s_.sensor, s_.r, c.existence, c.sensor.max_range, c.sensor.field_of_view, scan_step};
+    in.scan_step = scan_step;
+    in.record = c.record_trajectory && !s_.pending.empty();
+    return in;
+  }
+
+  void run(const std::vector<PlannedObservation>* scan, std::uint64_t scan_step) {
+    const std::size_t m = s_.store.size();
+    const std::size_t queued = s_.pending.size();
+    const PassBlocks blocks(m, kernel_.threads(), s_.config.grain, heavy_);
+    if constexpr (!kFs2) {
+      if (blocks.tasks == 1 && kernel_.threads() > 1 && m <= MotionNormalsAhead::kMaxParticles &&
+          scan != nullptr) {
+        ahead_.start_next(scan_step, queued, m);
+      }
+    }
+    const PassInputs in = inputs(scan_step);
+    if (in.record) recorder_.begin(s_.store.log_weight(), queued);
+    block_seconds_.assign(blocks.tasks, 0.0);
+    kernel_.for_each_block(
+        blocks.tasks, scratch_,
+        [&](std::size_t t, std::size_t, PassScratch& scratch) {
+          run_block(in, scan, t, blocks.begin(t), blocks.begin(t + 1), scratch);
+        },
+        1);
+    heavy_ = std::accumulate(block_seconds_.begin(), block_seconds_.end(), 0.0) >
+             s_.config.split_seconds;
+    if (in.record) recorder_.finish(kernel_, queued, s_.counters.controls - queued);
+    s_.pending.clear();
+  }
+
+  void run_block(const PassInputs& in, const std::vector<PlannedObservation>* scan, std::size_t t,
+                 std::size_t begin, std::size_t end, PassScratch& scratch) {
+    const Clock::time_point t0 = Clock::now();
+    if (!in.motion.pending.empty()) {
+      advance_block<Motion, kFs2>(motion_, in.motion, s_.store, s_.covariances, begin, end - begin,
+                                  in.record ? recorder_.buffer() : nullptr, scratch.motion);
+    }
+    const Clock::time_point t1 = Clock::now();
+    double associate_seconds = 0.0;
+    MapUpdateCounts counts;
+    if (scan != nullptr) {
+      if constexpr (kFs2) {
+        // The N normals of each particle's pose draw, stream (seed, scan step, particle,
+        // kProposal), for the whole block in one vectorised batch.
+        scratch.draws.resize(static_cast<std::size_t>(N) * (end - begin));
+        parallel::normals_for_particles(s_.config.seed, in.scan_step, parallel::Purpose::kProposal,
+                                        static_cast<std::uint32_t>(begin), end - begin, N,
+                                        scratch.draws);
+      }
+      if constexpr (kKnown) {
+        if constexpr (kFs2) {
+          propose_block_known<N>(in.known, *scan, s_.store, s_.covariances, begin, end,
+                                 scratch.draws.data(), scratch.known);
+        }
+        update_block_known<!kFs2>(in.known, *scan, s_.store, begin, end, scratch.known);
+      } else {
+        associate_seconds = update_block_unknown(in, *scan, t1, begin, end, scratch, counts);
+      }
+    }
+    const Clock::time_point t2 = Clock::now();
+    PhaseTimes& times = s_.phase_times.local();
+    times.predict += seconds_between(t0, t1);
+    times.associate += associate_seconds;
+    times.update += seconds_between(t1, t2) - associate_seconds;
+    times.created += counts.created;
+    times.removed += counts.removed;
+    block_seconds_[t] = seconds_between(t0, t2);
+  }
+
+  // Unknown association, per particle: choose (and, for 2.0, draw the pose), then change the
+  // map; one clock read between the phases times both. Returns the choosing time.
+  double update_block_unknown(const PassInputs& in, const std::vector<PlannedObservation>& scan,
+                              Clock::time_point mark, std::size_t begin, std::size_t end,
+                              PassScratch& scratch, MapUpdateCounts& counts) {
+    double associate_seconds = 0.0;
+    for (std::size_t i = begin; i < end; ++i) {
+      const double* draw = nullptr;
+      if constexpr (kFs2) draw = &scratch.draws[static_cast<std::size_t>(N) * (i - begin)];
+      associate_particle(in, scan, i, draw, scratch);
+      const Clock::time_point chosen = Clock::now();
+      associate_seconds += seconds_between(mark, chosen);
+      const Pose pose(s_.store.x()[i], s_.store.y()[i], s_.store.theta()[i]);
+      update_particle_map<kFs2>(in.map, pose, scan, scratch.assignment, scratch.search.terms,
+                                scratch.chosen_terms, s_.store.map(i), s_.store.index(i),
+                                scratch.map, counts);
+      mark = Clock::now();
+    }
+    return associate_seconds;
+  }
+
+  // Particle i's candidates, the scan's joint choice (ML or DAS, mutual exclusion) into
+  // scratch.assignment, the log-weight, and for FastSLAM 2.0 the pose drawn from the proposal
+  // folded over the chosen landmarks (`draw`: its N normals). FastSLAM 1.0 records where each
+  // chosen pair's EKF terms are (scratch.chosen_terms), so the map update reuses them.
+  void associate_particle(const PassInputs& in, const std::vector<PlannedObservation>& scan,
+                          std::size_t i, const double* draw, PassScratch& scratch) {
+    double* const col[5] = {s_.store.x().data(), s_.store.y().data(), s_.store.theta().data(),
+                            s_.store.v().data(), s_.store.omega().data()};
+    PoseGaussian<N> prior;
+    for (int k = 0; k < N; ++k) prior.mean[k] = col[k][i];
+    if constexpr (kFs2) prior.cov = s_.covariances.template at<N>(i);
+    const memory::LandmarkTree& map = s_.store.map(i);
+    find_candidates<N, kFs2, kMl>(in.search, prior, map, s_.store.index(i), scan, scratch.search);
+    scratch.assignment.resize(scan.size());
+    const std::span<std::int64_t> chosen(scratch.assignment);
+    const double log_p0 = s_.config.log_new_landmark;
+    double log_w;
+    if constexpr (kMl) {
+      log_w = associate_maximum_likelihood(scratch.search.candidates, log_p0, chosen);
+    } else {
+      parallel::RandomStream stream({s_.config.seed, in.scan_step, static_cast<std::uint32_t>(i),
+                                     parallel::Purpose::kAssociation});
+      log_w = associate_sampling(scratch.search.candidates, log_p0, stream, chosen, scratch.taken);
+    }
+    if constexpr (kFs2) {
+      const Fs2Draw<N> d =
+          fold_and_draw<N>(s_.sensor, s_.r, log_p0, prior, map, scan, chosen, draw);
+      // Under ML the weight is the chain of the folds' terms; under DAS it stays the product
+      // of the normalisers.
+      if constexpr (kMl) log_w = d.folded;
+      for (int k = 0; k < N; ++k) col[k][i] = d.state[k];
+      s_.covariances.template at<N>(i) = d.rest;
+    } else {
+      scratch.chosen_terms.resize(scan.size());
+      for (const AssociationCandidate& c : scratch.search.candidates) {
+        if (chosen[c.observation] == c.slot) scratch.chosen_terms[c.observation] = c.tag;
+      }
+    }
+    s_.store.log_weight()[i] += log_w;
+  }
+
+  Motion motion_;
+  FilterState& s_;
+  const parallel::ParticleKernel& kernel_;
+  TrajectoryRecorder& recorder_;
+  parallel::ThreadScratch<PassScratch> scratch_;
+  // The work of the last pass, per block (decides heavy_).
+  std::vector<double> block_seconds_;
+  MotionNormalsAhead ahead_;  // FastSLAM 1.0 only; last: destroyed, so waited for, first
+};
+
+// The factories of the algorithm families (pass_known.cc, pass_fastslam1.cc, pass_fastslam2.cc).
+std::unique_ptr<Pass> make_known_pass(FilterState& state, const parallel::ParticleKernel& kernel,
+                                      TrajectoryRecorder& recorder);
+std::unique_ptr<Pass> make_fastslam1_pass(FilterState& state,
+                                          const parallel::ParticleKernel& kernel,
+                                          TrajectoryRecorder& recorder);
+std::unique_ptr<Pass> make_fastslam2_pass(FilterState& state,
+                                          const parallel::ParticleKernel& kernel,
+                                          TrajectoryRecorder& recorder);
+
+}  // namespace fastslam::engine::internal

@@ -1,0 +1,268 @@
+#include "engine/internal/state_io.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstring>
+#include <istream>
+#include <limits>
+#include <ostream>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+
+#include "engine/internal/map_update.h"
+
+namespace fastslam::engine::internal {
+namespace {
+
+constexpr char kMagic[8] = {'F', 'S', 'L', 'A', 'M', 'S', 'T', '1'};
+constexpr std::uint32_t kVersion = 2;  // 2: unknown association (variance bound, free slots)
+constexpr std::uint64_t kLimit = std::uint64_t{1} << 34;
+
+[[noreturn]] void corrupt(const std::string& what) {
+  throw std::runtime_error("Filter::load: corrupt state (" + what + ")");
+}
+
+template <class T>
+void put(std::ostream& out, const T& value) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  out.write(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+
+template <class T>
+void put_vector(std::ostream& out, const std::vector<T>& values) {
+  put<std::uint64_t>(out, values.size());
+  out.write(reinterpret_cast<const char*>(values.data()),
+            static_cast<std::streamsize>(values.size() * sizeof(T)));
+}
+
+void read_bytes(std::istream& in, void* to, std::size_t bytes) {
+  in.read(static_cast<char*>(to), static_cast<std::streamsize>(bytes));
+  if (!in) throw std::runtime_error("Filter::load: truncated or unreadable state");
+}
+
+template <class T>
+T get(std::istream& in) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  T value;
+  read_bytes(in, &value, sizeof(T));
+  return value;
+}
+
+// A length-prefixed vector of at most `limit` elements, read in chunks of at most 1 MiB so that
+// memory grows only as fast as the stream delivers data.
+template <class T>
+std::vector<T> get_vector(std::istream& in, std::uint64_t limit) {
+  const auto n = get<std::uint64_t>(in);
+  if (n > limit) corrupt("a length is too large");
+  constexpr std::size_t kChunk = std::max<std::size_t>(1, (std::size_t{1} << 20) / sizeof(T));
+  std::vector<T> values;
+  for (std::size_t done = 0; done < n;) {
+    const std::size_t count = std::min<std::size_t>(kChunk, n - done);
+    values.resize(done + count);
+    read_bytes(in, values.data() + done, count * sizeof(T));
+    done += count;
+  }
+  return values;
+}
+
+// One entry of the known-id table, with its padding spelled out (and zero).
+struct KnownSlot {
+  std::int64_t id = 0;
+  memory::Slot slot = 0;
+  std::uint32_t zero = 0;
+};
+static_assert(sizeof(KnownSlot) == 16 && std::is_trivially_copyable_v<KnownSlot>);
+static_assert(sizeof(PendingControl) == 32 && sizeof(TrajectoryPoint) == 32,
+              "saved structs must have no padding");
+
+void put_maps(const memory::ParticleStore& store, std::ostream& out) {
+  for (std::size_t i = 0; i < store.size(); ++i) {
+    const bool same = i > 0 && store.map(i).shares_root_with(store.map(i - 1));
+    put<std::uint8_t>(out, same ? 1 : 0);
+    if (same) continue;
+    put<std::uint64_t>(out, store.map(i).size());
+    for (const auto [slot, lm] : store.map(i)) {
+      put(out, slot);
+      put(out, lm);
+    }
+  }
+}
+
+// The config, checked before any of its values is used: a bool must be 0 or 1, and the values
+// must pass validate (enums in range, particles >= 1, ...).
+FilterConfig get_config(std::istream& in) {
+  alignas(FilterConfig) unsigned char config_bytes[sizeof(FilterConfig)];
+  read_bytes(in, config_bytes, sizeof(config_bytes));
+  if (config_bytes[offsetof(FilterConfig, record_trajectory)] > 1 ||
+      config_bytes[offsetof(FilterConfig, existence) +
+                   offsetof(ExistenceConfig, negative_information)] > 1) {
+    corrupt("config flag");
+  }
+  FilterConfig config;
+  std::memcpy(&config, config_bytes, sizeof(config));
+  try {
+    validate(config);
+  } catch (const std::invalid_argument& e) {
+    corrupt(std::string("config: ") + e.what());
+  }
+  return config;
+}
+
+// Known association: the table maps distinct ids >= 0 onto the slots 0..K-1.
+KnownSlots get_known(std::istream& in, std::size_t& entries) {
+  const std::vector<KnownSlot> known = get_vector<KnownSlot>(in, kLimit);
+  std::vector<bool> slot_used(known.size(), false);
+  for (const KnownSlot& k : known) {
+    if (k.id < 0 || k.slot >= known.size() || slot_used[k.slot] || k.zero != 0) {
+      corrupt("known-id table");
+    }
+    slot_used[k.slot] = true;
+  }
+  entries = known.size();
+  KnownSlots table;
+  for (const KnownSlot& k : known) table.emplace(k.id, k.slot);
+  return table;
+}
+
+void get_columns(std::istream& in, memory::ParticleStore& store) {
+  for (std::span<double> column :
+       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
+    read_bytes(in, column.data(), column.size() * sizeof(double));
+  }
+  for (std::size_t i = 0; i < store.size(); ++i) {
+    if (!std::isfinite(store.x()[i]) || !std::isfinite(store.y()[i]) ||
+        !std::isfinite(store.theta()[i]) || !std::isfinite(store.v()[i]) ||
+        !std::isfinite(store.omega()[i]) || std::isnan(store.log_weight()[i]) ||
+        store.log_weight()[i] == std::numeric_limits<double>::infinity()) {
+      corrupt("particle " + std::to_string(i));
+    }
+  }
+}
+
+// Rebuilds one map with the same slots: inserting in slot order takes the lowest free slot, so
+// placeholders fill the holes and are erased afterwards. Known association: every map holds
+// exactly the K known slots. Unknown: any count, and holes (removed landmarks) of at most
+// kMaxHoles in all, so a corrupt slot cannot make the load allocate without bound.
+void get_map(std::istream& in, bool known_ids, std::size_t known_count, memory::LandmarkTree& map) {
+  const auto count = get<std::uint64_t>(in);
+  if (known_ids ? count != known_count : count > kLimit) corrupt("map size");
+  constexpr std::uint64_t kMaxHoles = std::uint64_t{1} << 24;
+  std::vector<memory::Slot> holes;
+  for (std::uint64_t k = 0; k < count; ++k) {
+    const auto slot = get<memory::Slot>(in);
+    const auto lm = get<memory::Landmark>(in);
+    if ((known_ids && slot >= known_count) || slot < map.size() ||
+        slot - map.size() > kMaxHoles - holes.size()) {
+      corrupt("slots out of order");
+    }
+    if (!std::isfinite(lm.x) || !std::isfinite(lm.y) || std::abs(lm.x) > 1e150 ||
+        std::abs(lm.y) > 1e150) {
+      corrupt("landmark position");
+    }
+    while (map.size() < slot) holes.push_back(map.insert({}));
+    map.insert(lm);
+  }
+  for (memory::Slot hole : holes) map.erase(hole);
+}
+
+}  // namespace
+
+void save_state(const FilterState& s, const std::vector<TrajectoryPoint>& trajectory,
+                std::ostream& out) {
+  static_assert(std::is_trivially_copyable_v<FilterConfig>);
+  out.write(kMagic, sizeof(kMagic));
+  put<std::uint32_t>(out, kVersion);
+  put<std::uint64_t>(out, sizeof(FilterConfig));
+  FilterConfig config = s.config;
+#if defined(__has_builtin)
+#if __has_builtin(__builtin_clear_padding)
+  __builtin_clear_padding(&config);  // equal configs, equal bytes
+#endif
+#endif
+  put(out, config);
+  const FilterCounters& c = s.counters;
+  for (std::uint64_t v :
+       {c.step, c.controls, c.scans, c.observations, c.resamples, c.weight_resets}) {
+    put(out, v);
+  }
+  put(out, s.landmark_variance_bound);
+  put_vector(out, s.pending);
+  put_vector(out, trajectory);
+  std::vector<KnownSlot> known;
+  known.reserve(s.known_slots.size());
+  for (const auto& [id, slot] : s.known_slots) known.push_back({id, slot, 0});
+  std::sort(known.begin(), known.end(),
+            [](const KnownSlot& a, const KnownSlot& b) { return a.id < b.id; });
+  put_vector(out, known);
+  put_vector(out, s.covariances.values());
+  const memory::ParticleStore& store = s.store;
+  for (std::span<const double> column :
+       {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
+    out.write(reinterpret_cast<const char*>(column.data()),
+              static_cast<std::streamsize>(column.size() * sizeof(double)));
+  }
+  put_maps(store, out);
+  if (!out) throw std::runtime_error("Filter::save: write failed");
+}
+
+StateHeader read_header(std::istream& in) {
+  char magic[sizeof(kMagic)];
+  in.read(magic, sizeof(magic));
+  if (!in || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0) {
+    throw std::runtime_error("Filter::load: not a fastslam filter state (bad magic)");
+  }
+  if (get<std::uint32_t>(in) != kVersion) {
+    throw std::runtime_error("Filter::load: unknown version");
+  }
+  if (get<std::uint64_t>(in) != sizeof(FilterConfig)) {
+    throw std::runtime_error("Filter::load: state written by an incompatible build");
+  }
+  StateHeader h;
+  h.config = get_config(in);
+  FilterCounters& c = h.counters;
+  for (std::uint64_t* v :
+       {&c.step, &c.controls, &c.scans, &c.observations, &c.resamples, &c.weight_resets}) {
+    *v = get<std::uint64_t>(in);
+  }
+  h.variance_bound = get<double>(in);
+  if (!std::isfinite(h.variance_bound) || h.variance_bound < 0) corrupt("variance bound");
+  h.pending = get_vector<PendingControl>(in, kLimit);
+  for (const PendingControl& p : h.pending) {
+    if (!std::isfinite(p.u0) || !std::isfinite(p.u1) || !std::isfinite(p.dt) || p.dt < 0 ||
+        p.step >= c.step) {
+      corrupt("queued control");
+    }
+  }
+  h.trajectory = get_vector<TrajectoryPoint>(in, kLimit);
+  h.known = get_known(in, h.known_entries);
+  const std::uint64_t cov_size = std::uint64_t{h.config.particles} * PoseCovariances::kSlot;
+  h.covariances = get_vector<double>(in, cov_size);
+  if (h.covariances.size() != cov_size) corrupt("covariance block size");
+  return h;
+}
+
+void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
+  s.counters = h.counters;
+  s.pending = std::move(h.pending);
+  s.known_slots = std::move(h.known);
+  s.covariances.values() = std::move(h.covariances);
+  s.landmark_variance_bound = h.variance_bound;
+  memory::ParticleStore& store = s.store;
+  get_columns(in, store);
+  const bool known_ids = s.config.association == Association::kKnown;
+  for (std::size_t i = 0; i < store.size(); ++i) {
+    const auto flag = get<std::uint8_t>(in);
+    if (flag > 1 || (flag == 1 && i == 0)) corrupt("map sharing");
+    if (flag == 1) {
+      store.map(i) = store.map(i - 1);
+      store.index(i) = store.index(i - 1);
+      continue;
+    }
+    get_map(in, known_ids, h.known_entries, store.map(i));
+    if (!known_ids) index_map(store.map(i), store.index(i));
+  }
+}
+
+}  // namespace fastslam::engine::internal

@@ -1,0 +1,42 @@
+// Trajectory recording (FilterConfig::record_trajectory): the weighted-mean pose after every
+// control. A pass that runs queued controls first `begin`s (the weights are snapshot as
+// exp(l_i - max l), since the controls do not change them), lets the motion stage write x, y,
+// cos, sin per control and particle into `buffer()`, then `finish`es: the weighted means, per
+// control, in fixed blocks folded in order (ParticleKernel::reduce), so bit-identical for any
+// thread count. Owns the buffer and the points not yet taken.
+// Thread safety: thread-compatible; the motion stage writes disjoint parts of the buffer
+// concurrently. Costs: begin O(M), finish O(M K) for K controls; the buffer (4 M K doubles) is
+// reused.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "engine/filter.h"
+#include "parallel/particle_kernel.h"
+
+namespace fastslam::engine::internal {
+
+class TrajectoryRecorder {
+ public:
+  // Prepares for `controls` controls over the particles with log-weights `log_weight`.
+  void begin(std::span<const double> log_weight, std::size_t controls);
+  // x, y, cos theta, sin theta of particle i after control k at [(k M + i) * 4].
+  double* buffer() { return recorded_.data(); }
+  // Appends one point per control; the first is control number `first_control`.
+  void finish(const parallel::ParticleKernel& kernel, std::size_t controls,
+              std::uint64_t first_control);
+
+  // The points recorded and not taken yet (saved with the state).
+  std::vector<TrajectoryPoint>& points() { return points_; }
+  const std::vector<TrajectoryPoint>& points() const { return points_; }
+
+ private:
+  std::vector<double> recorded_;
+  std::vector<double> weights_;
+  std::vector<TrajectoryPoint> points_;
+};
+
+}  // namespace fastslam::engine::internal

@@ -1,0 +1,203 @@
+// The unknown-id map update against an oracle: a std::map copy of the landmarks changed by the
+// scalar EKF (engine/landmark_ekf.h), negative information decided by brute-force geometry over
+// every landmark, new landmarks by initialize_landmark; afterwards the spatial index must hold
+// exactly the map's slots, means and extents. FastSLAM 1.0's reuse of the association's terms
+// must give the same bits as 2.0's evaluation at the same pose.
+#include "engine/internal/map_update.h"
+
+#include <cmath>
+#include <map>
+#include <random>
+#include <vector>
+
+#include <Eigen/Eigenvalues>
+#include <gtest/gtest.h>
+
+#include "engine/angles.h"
+#include "engine/association.h"
+#include "memory/node_heap.h"
+
+namespace fastslam::engine::internal {
+namespace {
+
+TEST(MapUpdateTest, LargestVarianceIsTheEigenvalueRoundedUp) {
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int k = 0; k < 1000; ++k) {
+    Eigen::Matrix2d a;
+    a << u(rng), u(rng), u(rng), u(rng);
+    const Eigen::Matrix2d cov = a * a.transpose() * std::pow(10.0, 3 * u(rng));
+    const memory::Landmark l{0, 0, cov(0, 0), cov(0, 1), cov(1, 1), 0, 0, 0};
+    const double exact = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues()[1];
+    const float got = largest_variance(l);
+    EXPECT_GE(static_cast<double>(got), exact * (1 - 1e-14));
+    EXPECT_LE(static_cast<double>(got), exact * (1 + 2e-7) + 1e-300);
+  }
+}
+
+struct World {
+  memory::PoolHeap heap;
+  memory::LandmarkTree map{heap};
+  memory::SpatialIndex index{heap};
+  std::map<memory::Slot, memory::Landmark> oracle;
+  RangeBearingModel sensor{SensorOffset{0.3, 0.0, 0.1}};
+  MapUpdateInput in;
+  Pose pose{2.0, 1.0, 0.4};
+  std::vector<PlannedObservation> scan;
+  std::vector<std::int64_t> assignment;
+
+  World() {
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    in.sensor = &sensor;
+    in.r << 0.01, 0, 0, 0.0004;
+    in.existence.initial = 0.7;
+    in.existence.seen = 0.5;
+    in.existence.missed = 0.6;
+    in.existence.remove_below = 0.0;
+    in.existence.range_margin = 1.0;
+    in.max_range = 15.0;
+    in.field_of_view = 2.0;
+    in.scan_step = 33;
+    for (int k = 0; k < 300; ++k) {
+      // log-odds 0.2..1.8: a miss removes some, keeps others.
+      const memory::Landmark l{20 * u(rng),
+                               20 * u(rng),
+                               0.05,
+                               0.0,
+                               0.05,
+                               1.0 + 0.8 * u(rng),
+                               static_cast<std::uint64_t>(k),
+                               4};
+      const memory::Slot slot = map.insert(l);
+      index.insert(slot, l.x, l.y, largest_variance(l));
+      oracle[slot] = l;
+    }
+    // Observations: every 7th landmark in view is observed (slightly off), plus three new ones.
+    int seen = 0;
+    for (const auto& [slot, l] : oracle) {
+      if (!in_view(l) || seen++ % 7 != 0) continue;
+      PlannedObservation o;
+      o.z = sensor.predict({l.x + 0.05, l.y - 0.03}, pose);
+      scan.push_back(o);
+      assignment.push_back(slot);
+    }
+    for (int k = 0; k < 3; ++k) {
+      PlannedObservation o;
+      o.z = {4.0 + k, 0.2 * k - 0.2};
+      scan.push_back(o);
+      assignment.push_back(kNewLandmark);
+    }
+  }
+
+  bool in_view(const memory::Landmark& l) const {
+    const Eigen::Vector2d at = sensor.sensor_position(pose);
+    const double dx = l.x - at[0], dy = l.y - at[1];
+    const double bearing = std::remainder(std::atan2(dy, dx) - (pose[2] + 0.1), 2 * kPi);
+    return std::hypot(dx, dy) <= in.max_range - in.existence.range_margin &&
+           std::fabs(bearing) <= in.field_of_view / 2;
+  }
+};
+
+void expect_index_is_the_map(const memory::LandmarkTree& map, const memory::SpatialIndex& index) {
+  std::map<memory::Slot, memory::SpatialEntry> entries;
+  index.within(0.0, 0.0, 1e6, [&](const memory::SpatialEntry& e) { entries[e.slot] = e; });
+  ASSERT_EQ(entries.size(), map.size());
+  for (const auto [slot, l] : map) {
+    ASSERT_TRUE(entries.count(slot)) << slot;
+    EXPECT_EQ(entries[slot].x, l.x);
+    EXPECT_EQ(entries[slot].y, l.y);
+    EXPECT_EQ(entries[slot].extent, largest_variance(l));
+  }
+}
+
+TEST(MapUpdateTest, MatchesTheOracle) {
+  World w;
+  MapUpdateScratch scratch;
+  MapUpdateCounts counts;
+  update_particle_map<true>(w.in, w.pose, w.scan, w.assignment, {}, {}, w.map, w.index, scratch,
+                            counts);
+  std::map<memory::Slot, memory::Landmark> want = w.oracle;
+  std::uint64_t removed = 0;
+  for (auto it = want.begin(); it != want.end();) {
+    memory::Landmark& l = it->second;
+    const auto chosen = std::find(w.assignment.begin(), w.assignment.end(), it->first);
+    if (chosen != w.assignment.end()) {
+      LandmarkGaussian g = to_gaussian(l);
+      update_landmark(w.sensor, g, w.pose, w.scan[chosen - w.assignment.begin()].z, w.in.r);
+      store_gaussian(g, l);
+      l.log_odds += 0.5;
+      l.last_seen = 33;
+    } else if (w.in_view(l)) {
+      l.log_odds -= 0.6;
+      if (l.log_odds < 0.0) {
+        it = want.erase(it);
+        ++removed;
+        continue;
+      }
+    }
+    ++it;
+  }
+  EXPECT_GT(removed, 0u);
+  EXPECT_EQ(counts.removed, removed);
+  EXPECT_EQ(counts.created, 3u);
+  std::size_t new_seen = 0;
+  for (const auto [slot, l] : w.map) {
+    const auto found = want.find(slot);
+    if (found == want.end()) {
+      // A new landmark: id (scan step) * 2^20 + observation index.
+      const std::size_t j = l.id - 33 * kObservationsPerScanLimit;
+      ASSERT_LT(j, w.scan.size());
+      EXPECT_EQ(w.assignment[j], kNewLandmark);
+      const LandmarkGaussian g = initialize_landmark(w.sensor, w.pose, w.scan[j].z, w.in.r);
+      EXPECT_EQ(l.x, g.mean[0]);
+      EXPECT_EQ(l.log_odds, 0.7);
+      ++new_seen;
+      continue;
+    }
+    EXPECT_NEAR(l.x, found->second.x, 1e-12);
+    EXPECT_NEAR(l.y, found->second.y, 1e-12);
+    EXPECT_NEAR(l.sxx, found->second.sxx, 1e-12);
+    EXPECT_DOUBLE_EQ(l.log_odds, found->second.log_odds);
+    EXPECT_EQ(l.last_seen, found->second.last_seen);
+  }
+  EXPECT_EQ(new_seen, 3u);
+  EXPECT_EQ(w.map.size(), want.size() + 3);
+  expect_index_is_the_map(w.map, w.index);
+}
+
+TEST(MapUpdateTest, ReusedTermsGiveTheSameBits) {
+  World a, b;
+  std::vector<LandmarkObservation> terms;
+  std::vector<std::uint32_t> chosen_terms(a.scan.size(), 0);
+  for (std::size_t j = 0; j < a.scan.size(); ++j) {
+    if (a.assignment[j] == kNewLandmark) continue;
+    chosen_terms[j] = static_cast<std::uint32_t>(terms.size());
+    terms.push_back(evaluate_observation(
+        a.sensor, to_gaussian(a.map.at(static_cast<memory::Slot>(a.assignment[j]))), a.pose,
+        a.scan[j].z, a.in.r));
+  }
+  MapUpdateScratch scratch;
+  MapUpdateCounts counts_a, counts_b;
+  update_particle_map<false>(a.in, a.pose, a.scan, a.assignment, terms, chosen_terms, a.map,
+                             a.index, scratch, counts_a);
+  update_particle_map<true>(b.in, b.pose, b.scan, b.assignment, {}, {}, b.map, b.index, scratch,
+                            counts_b);
+  ASSERT_EQ(a.map.size(), b.map.size());
+  for (const auto [slot, l] : a.map) {
+    const memory::Landmark& other = b.map.at(slot);
+    EXPECT_EQ(l.x, other.x);
+    EXPECT_EQ(l.sxy, other.sxy);
+    EXPECT_EQ(l.log_odds, other.log_odds);
+  }
+}
+
+TEST(MapUpdateTest, IndexMapIndexesEverySlot) {
+  World w;
+  memory::SpatialIndex rebuilt(w.heap);
+  index_map(w.map, rebuilt);
+  expect_index_is_the_map(w.map, rebuilt);
+}
+
+}  // namespace
+}  // namespace fastslam::engine::internal
