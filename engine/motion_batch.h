@@ -21,7 +21,7 @@
 
 #include "engine/angles.h"
 #include "engine/motion_model.h"
-#include "parallel/internal/vmath.h"
+#include "parallel/vector_math.h"
 
 namespace fastslam::engine {
 
@@ -54,8 +54,8 @@ using CovBlock = std::array<double*, kCovEntries<N>>;
 
 namespace motion_batch_internal {
 
-using parallel::internal::madd;
-using parallel::internal::sincos_in_domain;
+using parallel::madd;
+using parallel::sincos_in_domain;
 
 // wrap_angle(a) for a within one turn of (-pi, pi] (the sum of a wrapped heading and a step of
 // less than 2 pi), with the same result bits; `ok` turns false when a is beyond that (the lane
@@ -72,7 +72,7 @@ using parallel::internal::sincos_in_domain;
 // Whether sincos_small(u1) is sincos(u1): steering angles are well inside it (the car's limit
 // is far below pi/4); a lane beyond it takes the scalar path.
 [[gnu::always_inline]] inline bool steer_in_small_domain(double u1) noexcept {
-  return std::fabs(u1) <= parallel::internal::kSinCosSmallArg;
+  return std::fabs(u1) <= parallel::kSinCosSmallArg;
 }
 
 // The Jacobian dh/ds of a model is the identity plus the entries listed in kJacobianPattern
@@ -91,8 +91,8 @@ struct Lane<BaileyCarModel> {
     const double vdt = u0 * dt;
     const double heading = u1 + s[2];
     double c, sn, cg, sg;
-    parallel::internal::sincos(heading, c, sn);
-    parallel::internal::sincos_small(u1, cg, sg);  // a steering angle: no range reduction
+    parallel::sincos(heading, c, sn);
+    parallel::sincos_small(u1, cg, sg);  // a steering angle: no range reduction
     bool ok = sincos_in_domain(heading) & steer_in_small_domain(u1);
     s[0] = madd(vdt, c, s[0]);
     s[1] = madd(vdt, sn, s[1]);
@@ -105,8 +105,8 @@ struct Lane<BaileyCarModel> {
                                            double (&v)[kN][2]) noexcept {
     const double vdt = u0 * dt;
     double c, sn, cg, sg;
-    parallel::internal::sincos(u1 + s[2], c, sn);
-    parallel::internal::sincos_small(u1, cg, sg);  // lanes beyond its domain: move() is false
+    parallel::sincos(u1 + s[2], c, sn);
+    parallel::sincos_small(u1, cg, sg);  // lanes beyond its domain: move() is false
     j[0] = -(vdt * sn);
     j[1] = vdt * c;
     v[0][0] = dt * c;
@@ -127,7 +127,7 @@ struct Lane<UnicycleModel> {
                                           double u1, double dt) noexcept {
     const double vdt = u0 * dt;
     double c, sn;
-    parallel::internal::sincos(s[2], c, sn);
+    parallel::sincos(s[2], c, sn);
     bool ok = sincos_in_domain(s[2]);
     s[0] = madd(vdt, c, s[0]);
     s[1] = madd(vdt, sn, s[1]);
@@ -140,7 +140,7 @@ struct Lane<UnicycleModel> {
                                            double (&v)[kN][2]) noexcept {
     const double vdt = u0 * dt;
     double c, sn;
-    parallel::internal::sincos(s[2], c, sn);
+    parallel::sincos(s[2], c, sn);
     j[0] = -(vdt * sn);
     j[1] = vdt * c;
     v[0][0] = dt * c;
@@ -161,8 +161,8 @@ struct Lane<AckermannModel> {
                                           double u1, double dt) noexcept {
     const AckermannGeometry& g = m.geometry();
     double ca, sa, c, sn;
-    parallel::internal::sincos(u1, ca, sa);
-    parallel::internal::sincos(s[2], c, sn);
+    parallel::sincos(u1, ca, sa);
+    parallel::sincos(s[2], c, sn);
     bool ok = sincos_in_domain(u1) & sincos_in_domain(s[2]);
     const double t = sa / ca;
     const double vc = u0 / (1.0 - t * g.h / g.l);
@@ -180,8 +180,8 @@ struct Lane<AckermannModel> {
                                            double (&v)[kN][2]) noexcept {
     const AckermannGeometry& g = m.geometry();
     double ca, sa, c, sn;
-    parallel::internal::sincos(u1, ca, sa);
-    parallel::internal::sincos(s[2], c, sn);
+    parallel::sincos(u1, ca, sa);
+    parallel::sincos(s[2], c, sn);
     const double t = sa / ca;
     const double sec2 = madd(t, t, 1.0);
     const double denom = 1.0 - t * g.h / g.l;
@@ -223,7 +223,7 @@ struct Lane<BrownianModel<Turn>> {
     const double v = s[3] + u0;
     const double w = s[4] + u1;
     double c, sn;
-    parallel::internal::sincos(s[2], c, sn);
+    parallel::sincos(s[2], c, sn);
     bool ok = sincos_in_domain(s[2]);
     s[0] = madd(v * c, dt, s[0]);
     s[1] = madd(v * sn, dt, s[1]);
@@ -239,7 +239,7 @@ struct Lane<BrownianModel<Turn>> {
                                            double (&v)[kN][2]) noexcept {
     const double vel = s[3] + u0;
     double c, sn;
-    parallel::internal::sincos(s[2], c, sn);
+    parallel::sincos(s[2], c, sn);
     j[0] = -(vel * sn) * dt;
     j[1] = c * dt;
     j[2] = vel * c * dt;

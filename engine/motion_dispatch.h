@@ -30,8 +30,6 @@ enum class MotionKind : std::uint8_t {
   kAckermann,          // AckermannModel: control (encoder speed, steering); state = sensor pose
   kBrownian,           // BrownianVelocityModel: no odometry, (v, omega) walked (eq. 79-81)
   kBrownianCurvature,  // BrownianCurvatureModel: no odometry, (v, kappa) walked
-  // Transitional spelling for code not yet renamed (tests/engine/filter_test.cc); remove with it.
-  kVictoriaPark = kAckermann,
 };
 
 template <>

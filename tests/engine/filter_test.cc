@@ -260,7 +260,7 @@ TEST(FilterConfigTest, ValidateNamesTheFirstBadField) {
       {"wheelbase", [](FilterConfig& c) { c.motion.wheelbase = 0; }},
       {"geometry",
        [](FilterConfig& c) {
-         c.motion.kind = MotionKind::kVictoriaPark;
+         c.motion.kind = MotionKind::kAckermann;
          c.motion.geometry.l = -1;
        }},
       {"association", [](FilterConfig& c) { c.association = static_cast<Association>(9); }},
@@ -472,7 +472,7 @@ TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording
   const auto controls = static_cast<std::size_t>(
       std::count_if(events.begin(), events.end(), [](const Event& e) { return !e.is_scan; }));
   for (const MotionKind kind :
-       {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kVictoriaPark,
+       {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kAckermann,
         MotionKind::kBrownian, MotionKind::kBrownianCurvature}) {
     for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
       SCOPED_TRACE("motion " + std::to_string(static_cast<int>(kind)) + ", " +
