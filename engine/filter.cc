@@ -141,8 +141,7 @@ struct Filter::Impl {
         // measured best for it), so that small filters resample inline instead of paying a
         // parallel dispatch per scan. The result does not depend on it.
         resampler(c.resample, kernel, parallel::KernelConfig{}.grain),
-        store(c.particles, heap),
-        pose_cov(static_cast<std::size_t>(c.particles) * 25, 0.0),
+        store(c.particles, heap, store_options(c)),
         sensor(c.sensor.offset) {
     r << c.sensor.sigma_range * c.sensor.sigma_range, 0, 0,
         c.sensor.sigma_bearing * c.sensor.sigma_bearing;
@@ -153,6 +152,21 @@ struct Filter::Impl {
       for (int k = 0; k < 5; ++k) columns[k][i] = c.initial_pose[k];
       store.log_weight()[i] = log_m;
     }
+  }
+
+  // Known ids find landmarks by slot: no spatial index. FastSLAM 2.0 keeps the state's
+  // covariance, N x N in slots of 25: the motion's since the last scan plus, without odometry,
+  // the velocities' left by the scan's draw (draw_state), which follows its particle through
+  // resampling.
+  static memory::StoreOptions store_options(const FilterConfig& c) {
+    memory::StoreOptions o;
+    o.indexing =
+        c.association == Association::kKnown ? memory::Indexing::kNone : memory::Indexing::kSpatial;
+    if (c.algorithm == Algorithm::kFastSlam2) {
+      o.pose_covariance = without_odometry(c.motion.kind) ? memory::PoseCovariance::kCarried
+                                                          : memory::PoseCovariance::kScratch;
+    }
+    return o;
   }
 
   static const FilterConfig& checked(const FilterConfig& c) {
@@ -192,6 +206,7 @@ struct Filter::Impl {
     auto save = [&](std::size_t i, const State& s) {
       for (int k = 0; k < N; ++k) col[k][i] = s[k];
     };
+    double* const pose_cov = store.pose_cov().data();
     auto cov_of = [&](std::size_t i) { return Eigen::Map<Cov>(&pose_cov[i * 25]); };
     const std::size_t m = store.size();
     const bool record = config.record_trajectory && !pending.empty();
@@ -293,6 +308,7 @@ struct Filter::Impl {
     }
     double* const store_col[5] = {store.x().data(), store.y().data(), store.theta().data(),
                                   store.v().data(), store.omega().data()};
+    double* const pose_cov = store.pose_cov().data();
     StateBlock<N> block;
     block.lanes = lanes;
     for (int k = 0; k < N; ++k) {
@@ -412,6 +428,7 @@ struct Filter::Impl {
     double* const state[5] = {store.x().data() + begin, store.y().data() + begin,
                               store.theta().data() + begin, store.v().data() + begin,
                               store.omega().data() + begin};
+    double* const pose_cov = store.pose_cov().data();
     ProposalLanes<N> proposal;
     for (int k = 0; k < N; ++k) {
       proposal.mean[k] = column(k);
@@ -505,12 +522,12 @@ struct Filter::Impl {
           stored.log_odds = config.existence.initial;
           stored.id = o.id;
           stored.last_seen = step_now;
-          store.map(begin + l).insert(stored);
+          store.map(begin + l).insert(stored, 0.0f);  // unindexed: no extent
         }
         continue;
       }
       for (std::size_t l = 0; l < count; ++l) {
-        memory::Landmark& stored = store.map(begin + l).edit(o.slot);
+        memory::Landmark& stored = store.map(begin + l).edit_unindexed(o.slot);
         edited[l] = &stored;
         lm.x[l] = stored.x;
         lm.y[l] = stored.y;
@@ -549,8 +566,8 @@ struct Filter::Impl {
                           const CovOf& cov_of, AssociationScratch& scratch) {
     constexpr int N = Motion::kStateDim;
     const bool fs2 = draw != nullptr;
-    const memory::LandmarkTree& map = store.map(i);
-    const memory::SpatialIndex& index = store.index(i);
+    const memory::LandmarkTree& map = store.map(i).tree();
+    const memory::SpatialIndex& index = store.map(i).index();
     PoseGaussian<N> prior;
     prior.mean = s;
     if (fs2) prior.cov = cov_of(i);
@@ -701,8 +718,8 @@ struct Filter::Impl {
   void update_particle_unknown(std::size_t i, const std::vector<PlannedObservation>& scan,
                                std::uint64_t scan_step, bool fs2, AssociationScratch& scratch) {
     const std::vector<std::int64_t>& assignment = scratch.assignment;
-    memory::LandmarkTree& map = store.map(i);
-    memory::SpatialIndex& index = store.index(i);
+    memory::ParticleMap& map = store.map(i);
+    const memory::SpatialIndex& index = map.index();
     const Pose pose(store.x()[i], store.y()[i], store.theta()[i]);
     const auto step_now = static_cast<std::int64_t>(scan_step);
     PhaseTimes& counts = phase_times.local();
@@ -710,21 +727,22 @@ struct Filter::Impl {
     for (std::size_t j = 0; j < scan.size(); ++j) {
       if (assignment[j] == kNewLandmark) continue;
       const auto slot = static_cast<memory::Slot>(assignment[j]);
-      memory::Landmark& stored = map.edit(slot);
-      const double from_x = stored.x, from_y = stored.y;
-      LandmarkGaussian lm = to_gaussian(stored);
-      // 1.0: the terms from the association (same pose, same landmark); 2.0: at the drawn pose.
-      if (fs2) {
-        apply_update(lm, evaluate_observation(sensor, lm, pose, scan[j].z, r), r);
-      } else {
-        apply_update(lm, scratch.terms[scratch.chosen_terms[j]], r);
-      }
-      store_gaussian(lm, stored);
-      stored.log_odds += config.existence.seen;
-      stored.last_seen = step_now;
-      if (stored.x != from_x || stored.y != from_y) {
-        index.move(slot, from_x, from_y, stored.x, stored.y, largest_variance(stored));
-      }
+      map.update(
+          slot,
+          [&](memory::Landmark& stored) {
+            LandmarkGaussian lm = to_gaussian(stored);
+            // 1.0: the terms from the association (same pose, same landmark); 2.0: at the drawn
+            // pose.
+            if (fs2) {
+              apply_update(lm, evaluate_observation(sensor, lm, pose, scan[j].z, r), r);
+            } else {
+              apply_update(lm, scratch.terms[scratch.chosen_terms[j]], r);
+            }
+            store_gaussian(lm, stored);
+            stored.log_odds += config.existence.seen;
+            stored.last_seen = step_now;
+          },
+          largest_variance);
       scratch.touched.push_back(slot);
     }
     const ExistenceConfig& ex = config.existence;
@@ -747,11 +765,12 @@ struct Filter::Impl {
       for (const memory::SpatialEntry& e : scratch.in_view) {
         const double log_odds = map.at(e.slot).log_odds - ex.missed;
         if (log_odds < ex.remove_below) {
-          index.erase(e.slot, e.x, e.y);
           map.erase(e.slot);
           ++counts.removed;
         } else {
-          map.edit(e.slot).log_odds = log_odds;
+          map.update(
+              e.slot, [&](memory::Landmark& stored) { stored.log_odds = log_odds; },
+              largest_variance);
         }
       }
     }
@@ -762,8 +781,7 @@ struct Filter::Impl {
       stored.log_odds = ex.initial;
       stored.id = scan_step * kObservationsPerScanLimit + j;
       stored.last_seen = step_now;
-      const memory::Slot slot = map.insert(stored);
-      index.insert(slot, stored.x, stored.y, largest_variance(stored));
+      map.insert(stored, largest_variance(stored));
       ++counts.created;
     }
   }
@@ -772,12 +790,6 @@ struct Filter::Impl {
   // landmark covariance of eq. 70 has eigenvalues sigma_r^2 and (range sigma_phi)^2.
   double measurement_variance(double range) const {
     return std::max(r(0, 0), range * range * r(1, 1));
-  }
-
-  // Whether pose_cov holds anything between a scan and the next control: the velocities'
-  // covariance of FastSLAM 2.0 on the no-odometry state (draw_state); zero otherwise.
-  bool carries_velocity_cov() const {
-    return config.algorithm == Algorithm::kFastSlam2 && without_odometry(config.motion.kind);
   }
 
   void resample(std::uint64_t scan_step) {
@@ -795,16 +807,6 @@ struct Filter::Impl {
       resamples += outcome.resampled ? 1 : 0;
       // The weights summed to one after the last scan, so their sum now is this scan's factor.
       log_evidence += outcome.before.log_sum;
-      if (outcome.resampled && carries_velocity_cov()) {
-        // FastSLAM 2.0 without odometry: the velocities' covariance outlives the scan
-        // (draw_state), so it follows its particle to the descendants.
-        const std::span<const std::uint32_t> ancestors = resampler.last_ancestors();
-        cov_scratch.resize(pose_cov.size());
-        for (std::size_t i = 0; i < ancestors.size(); ++i) {
-          std::copy_n(&pose_cov[std::size_t{ancestors[i]} * 25], 25, &cov_scratch[i * 25]);
-        }
-        pose_cov.swap(cov_scratch);
-      }
     } catch (const std::invalid_argument& e) {
       // A NaN or +inf log-weight: a numerical failure inside the filter, not refused input (the
       // scan has been applied), so not std::invalid_argument, whose contract is "unchanged".
@@ -825,10 +827,6 @@ struct Filter::Impl {
   parallel::ParticleKernel kernel;
   parallel::Resampler resampler;
   memory::ParticleStore store;
-  // FastSLAM 2.0: the state's covariance, N x N in slots of 25: the motion's since the last scan
-  // plus, without odometry, the velocities' left by the scan's draw (draw_state).
-  std::vector<double> pose_cov;
-  std::vector<double> cov_scratch;  // resample's gather of pose_cov
   RangeBearingModel sensor;
   Eigen::Matrix2d r;
   std::vector<PendingControl> pending;
@@ -1022,16 +1020,13 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
                               half_trace + std::sqrt(std::max(0.0, half_trace * half_trace - det)));
   }
   if (!s.pending.empty()) s.run_pass(nullptr, 0);
-  memory::LandmarkTree map(s.heap);
-  memory::SpatialIndex index(s.heap);
+  memory::ParticleMap map = s.store.empty_map();
   for (const MapLandmark& l : landmarks) {
     memory::Landmark stored{l.x, l.y, l.sxx, l.sxy, l.syy, l.log_odds, l.id, 0};
-    const memory::Slot slot = map.insert(stored);
-    if (!known_ids) index.insert(slot, l.x, l.y, largest_variance(stored));
+    map.insert(stored, largest_variance(stored));
   }
   for (std::size_t i = 0; i < s.store.size(); ++i) {
     s.store.map(i) = map;
-    s.store.index(i) = index;
   }
   if (known_ids) s.known_slots = std::move(known);
   s.landmark_variance_bound = variance_bound;
@@ -1084,7 +1079,7 @@ Estimate Filter::estimate() {
   const double best_pose[5] = {store.x()[best], store.y()[best], store.theta()[best],
                                store.v()[best], store.omega()[best]};
   std::copy(std::begin(best_pose), std::end(best_pose), e.best_pose);
-  const memory::LandmarkTree& map = store.map(best);
+  const memory::LandmarkTree& map = store.map(best).tree();
   e.map.reserve(map.size());
   for (const auto [slot, lm] : map) {
     e.map.push_back({slot, lm.id, lm.x, lm.y, lm.sxx, lm.sxy, lm.syy, lm.log_odds, lm.last_seen});
@@ -1232,7 +1227,11 @@ void Filter::save(std::ostream& out) const {
   std::sort(known.begin(), known.end(),
             [](const KnownSlot& a, const KnownSlot& b) { return a.id < b.id; });
   put_vector(out, known);
-  put_vector(out, s.pose_cov);
+  // M x 25 doubles, zero when the store keeps no covariance (FastSLAM 1.0).
+  const std::span<const double> kept_cov = s.store.pose_cov();
+  std::vector<double> pose_cov(kept_cov.begin(), kept_cov.end());
+  pose_cov.resize(s.store.size() * memory::ParticleStore::kPoseCovStride, 0.0);
+  put_vector(out, pose_cov);
   const memory::ParticleStore& store = s.store;
   for (std::span<const double> column :
        {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
@@ -1323,7 +1322,7 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
   s.pending = std::move(pending);
   s.trajectory = std::move(trajectory);
   for (const KnownSlot& k : known) s.known_slots.emplace(k.id, k.slot);
-  s.pose_cov = std::move(pose_cov);
+  std::copy_n(pose_cov.begin(), s.store.pose_cov().size(), s.store.pose_cov().begin());
   s.landmark_variance_bound = variance_bound;
   memory::ParticleStore& store = s.store;
   for (std::span<double> column :
@@ -1343,14 +1342,13 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
     if (flag > 1 || (flag == 1 && i == 0)) corrupt("map sharing");
     if (flag == 1) {
       store.map(i) = store.map(i - 1);
-      store.index(i) = store.index(i - 1);
       continue;
     }
     // Rebuild with the same slots: inserting in slot order takes the lowest free slot, so
     // placeholders fill the holes and are erased afterwards. Known association: every map
     // holds exactly the K known slots. Unknown: any count, and holes (removed landmarks) of at
     // most kMaxHoles in all, so a corrupt slot cannot make the load allocate without bound.
-    memory::LandmarkTree& map = store.map(i);
+    memory::LandmarkTree map(s.heap);
     const bool known_ids = config.association == Association::kKnown;
     const auto count = get<std::uint64_t>(in);
     if (known_ids ? count != known.size() : count > kLimit) corrupt("map size");
@@ -1371,11 +1369,7 @@ std::unique_ptr<Filter> Filter::load(std::istream& in) {
       map.insert(lm);
     }
     for (memory::Slot hole : holes) map.erase(hole);
-    if (!known_ids) {
-      for (const auto [slot, lm] : map) {
-        store.index(i).insert(slot, lm.x, lm.y, largest_variance(lm));
-      }
-    }
+    store.map(i) = memory::ParticleMap(std::move(map), store.options().indexing, largest_variance);
   }
   return std::unique_ptr<Filter>(new Filter(std::move(impl)));
 }

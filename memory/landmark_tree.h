@@ -30,12 +30,12 @@
 #pragma once
 
 #include <array>
-#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <iterator>
 
 #include "memory/node_heap.h"
+#include "memory/refcount.h"
 
 namespace fastslam::memory {
 
@@ -47,33 +47,14 @@ struct Landmark {
   double sxx = 0.0;  // covariance (symmetric 2x2: xx, xy, yy)
   double sxy = 0.0;
   double syy = 0.0;
-  double log_odds = 0.0;     // existence (ALGORITHM.md, eq. 73-75)
-  std::uint64_t id = 0;      // identity set by the engine, stable across copies
+  double log_odds = 0.0;       // existence (ALGORITHM.md, eq. 73-75)
+  std::uint64_t id = 0;        // identity set by the engine, stable across copies
   std::int64_t last_seen = 0;  // step of the last association
   friend bool operator==(const Landmark&, const Landmark&) = default;
 };
 static_assert(sizeof(Landmark) == 64);
 
 using Slot = std::uint32_t;
-
-// Reference count policies. `AtomicRefcount` is the default and the only one safe when maps
-// are shared across threads; `LocalRefcount` is for single-threaded use and for tests that run
-// one suite over both.
-struct AtomicRefcount {
-  std::atomic<std::uint32_t> count{1};
-  void acquire() noexcept { count.fetch_add(1, std::memory_order_relaxed); }
-  // True when this was the last reference: the caller then owns the node and frees it.
-  bool release() noexcept { return count.fetch_sub(1, std::memory_order_acq_rel) == 1; }
-  // Acquire: writes of the thread that dropped the count to one happen before ours.
-  bool unique() const noexcept { return count.load(std::memory_order_acquire) == 1; }
-};
-
-struct LocalRefcount {
-  std::uint32_t count = 1;
-  void acquire() noexcept { ++count; }
-  bool release() noexcept { return --count == 0; }
-  bool unique() const noexcept { return count == 1; }
-};
 
 // A memory policy bundle (as immer's memory_policy): the shape and the counting.
 template <unsigned InnerBits, unsigned LeafBits, class Refcount>

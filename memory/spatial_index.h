@@ -63,8 +63,9 @@
 #include <cstdint>
 #include <span>
 
-#include "memory/landmark_tree.h"  // Slot, AtomicRefcount, LocalRefcount
+#include "memory/landmark_tree.h"  // Slot
 #include "memory/node_heap.h"
+#include "memory/refcount.h"
 
 namespace fastslam::memory {
 

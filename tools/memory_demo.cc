@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -57,8 +58,10 @@ int run_memory_demo(const MemoryDemoOptions& options) {
                 static_cast<long long>(one_map.live_nodes), build_seconds);
 
     memory::ParticleStore store(m, heap);
-    for (std::uint32_t i = 0; i < m; ++i) store.map(i) = base;
-    base.clear();
+    memory::ParticleMap base_map(std::move(base), memory::Indexing::kNone,
+                                 [](const memory::Landmark&) { return 0.0f; });
+    for (std::uint32_t i = 0; i < m; ++i) store.map(i) = base_map;
+    base_map.clear();
 
     std::vector<std::uint32_t> index(m);
     std::int64_t peak_bytes = 0;
@@ -72,10 +75,10 @@ int run_memory_demo(const MemoryDemoOptions& options) {
                             for (std::uint32_t p = r.begin(); p != r.end(); ++p) {
                               parallel::RandomStream rng(
                                   {options.seed, step, p, parallel::Purpose::kUser});
-                              memory::LandmarkTree& map = store.map(p);
+                              memory::ParticleMap& map = store.map(p);
                               for (std::uint32_t k = 0; k < options.updates_per_step; ++k) {
                                 const auto slot = static_cast<memory::Slot>(rng.next_u64() % n);
-                                memory::Landmark& landmark = map.edit(slot);
+                                memory::Landmark& landmark = map.edit_unindexed(slot);
                                 landmark.x += 0.01 * rng.normal();
                                 landmark.last_seen = step;
                               }

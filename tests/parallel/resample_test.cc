@@ -729,7 +729,8 @@ void fill_store(memory::ParticleStore& store, const std::vector<double>& log_wei
     store.theta()[i] = 0.001 * static_cast<double>(i);
     store.log_weight()[i] = log_weight[i];
     for (int k = 0; k < landmarks; ++k) {
-      store.map(i).insert({.x = static_cast<double>(i), .id = static_cast<std::uint64_t>(k)});
+      store.map(i).insert({.x = static_cast<double>(i), .id = static_cast<std::uint64_t>(k)},
+                          0.0f);
     }
   }
 }
