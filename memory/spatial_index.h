@@ -357,4 +357,6 @@ extern template class BasicSpatialIndex<SpatialPolicy<1, 8, LocalRefcount>>;
 
 }  // namespace fastslam::memory
 
-#include "memory/internal/spatial_index_impl.h"
+#include "memory/internal/spatial_index_changes.h"
+#include "memory/internal/spatial_index_nodes.h"
+#include "memory/internal/spatial_index_queries.h"
