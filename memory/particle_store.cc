@@ -87,7 +87,13 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   const bool carried = options_.pose_covariance == PoseCovariance::kCarried;
   if (carried) pose_cov_spare_.resize(m * kPoseCovStride);
   double* const ncov = pose_cov_spare_.data();
-  std::vector<ParticleMap> nmaps(m, empty_map());
+  // The survivors' maps, in blocks: one allocation per gather as large as all the maps would
+  // be handed back to the system by the allocator and fault in fresh pages every time.
+  constexpr std::size_t kMapBlock = 8192;
+  std::vector<std::vector<ParticleMap>> survivors((m + kMapBlock - 1) / kMapBlock);
+  for (std::size_t b = 0; b < survivors.size(); ++b) {
+    survivors[b].assign(std::min(kMapBlock, m - b * kMapBlock), empty_map());
+  }
   if (grain == 0) grain = 1;
   for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k != end; ++k) {
@@ -102,7 +108,7 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
         std::copy_n(&pose_cov_[std::size_t{i} * kPoseCovStride], kPoseCovStride,
                     &ncov[k * kPoseCovStride]);
       }
-      nmaps[k] = maps_[i];  // bumps the roots' counts
+      survivors[k / kMapBlock][k % kMapBlock] = maps_[i];  // bumps the roots' counts
     }
   });
   x_.swap(nx);
@@ -116,12 +122,17 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   } else if (options_.pose_covariance == PoseCovariance::kScratch) {
     pose_cov_.resize(m * kPoseCovStride, 0.0);
   }
-  maps_.swap(nmaps);
-  // The old maps: each drops one reference; trees no survivor shares are freed, in
-  // parallel.
-  for_blocks(nmaps.size(), grain, [&](std::size_t begin, std::size_t end) {
+  // The old maps each drop one reference as the survivors replace them (trees no survivor
+  // shares are freed there), in parallel; maps beyond the new count are released first.
+  if (m < from_size) {
+    for_blocks(from_size - m, grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k != end; ++k) maps_[m + k].clear();
+    });
+  }
+  maps_.resize(m, empty_map());
+  for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k != end; ++k) {
-      nmaps[k].clear();
+      maps_[k] = std::move(survivors[k / kMapBlock][k % kMapBlock]);
     }
   });
 }
