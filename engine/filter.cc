@@ -96,17 +96,14 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
   const bool known_ids = s.config.association == Association::kKnown;
   internal::MapCheck checked = internal::check_map(landmarks, known_ids, s.landmark_variance_bound);
   impl.drain();
-  memory::LandmarkTree map(s.heap);
-  memory::SpatialIndex index(s.heap);
+  memory::LandmarkTree tree(s.heap);
   for (const MapLandmark& l : landmarks) {
     const memory::Landmark stored{l.x, l.y, l.sxx, l.sxy, l.syy, l.log_odds, l.id, 0};
-    map.insert(stored);
+    tree.insert(stored);
   }
-  if (!known_ids) internal::index_map(map, index);
-  for (std::size_t i = 0; i < s.store.size(); ++i) {
-    s.store.map(i) = map;
-    s.store.index(i) = index;
-  }
+  const memory::ParticleMap map(std::move(tree), s.store.options().indexing,
+                                internal::largest_variance);
+  for (std::size_t i = 0; i < s.store.size(); ++i) s.store.map(i) = map;
   if (known_ids) s.known_slots = std::move(checked.known);
   s.landmark_variance_bound = checked.variance_bound;
 }
@@ -157,7 +154,7 @@ Estimate Filter::estimate() {
   const double best_pose[5] = {store.x()[best], store.y()[best], store.theta()[best],
                                store.v()[best], store.omega()[best]};
   std::copy(std::begin(best_pose), std::end(best_pose), e.best_pose);
-  const memory::LandmarkTree& map = store.map(best);
+  const memory::LandmarkTree& map = store.map(best).tree();
   e.map.reserve(map.size());
   for (const auto [slot, lm] : map) {
     e.map.push_back({slot, lm.id, lm.x, lm.y, lm.sxx, lm.sxy, lm.syy, lm.log_odds, lm.last_seen});

@@ -1,41 +1,23 @@
-// The map of one particle: a persistent, reference-counted radix tree of landmarks.
-//
-// Design note (FastSLAM paper, section 8 and figure 9). Every particle owns a map; after
-// resampling many particles hold the same map, and a step changes only the few landmarks in
-// view. So a map is a tree whose nodes are shared between particles: copying a map copies one
-// root pointer (O(1)); changing landmark i copies the root-to-leaf path of i and shares every
-// other subtree with the source ("path copying"). A node whose reference count is one belongs
-// to this map alone and is changed in place, as immer's transients do, so ten updates under one
-// subtree copy its path once, not ten times.
-//
-// Shape: a radix tree over slots (dense indices) with `2^kInnerBits` children per inner node
-// and `2^kLeafBits` landmarks stored inline per leaf; see docs/memory.md for why the default
-// fanout was chosen (measured). Slots are stable for a landmark's life: `insert` returns the
-// lowest free slot (slots of erased landmarks are reused, so the slot space stays as large as
-// the live map, not as the history), `erase` frees one. Iteration is in slot order.
-//
-// Ownership: a tree borrows its `NodeHeap`, which must outlive it and every copy of it. All
-// copies of a tree share its heap.
-// Thread safety: a tree handle is thread-compatible (const methods may run concurrently; a
-// mutating method needs exclusive use of that handle). Different handles that share nodes may
-// be copied, read, mutated and destroyed from any threads at once: counts are atomic (relaxed
-// increment, acquire-release decrement) and a shared node is never written, only copied.
-// Costs (N live landmarks, h = tree height = O(log N)):
-//   copy, move, size, empty: O(1), no allocation.
-//   find, at: O(h), no allocation.
-//   edit, set: O(h); copies each shared node on the path (at most h + 1 allocations).
-//   insert, erase: O(h * 2^kInnerBits) to find/free the slot; allocation as for edit.
-//   destruction: O(1) while other handles share the root; freeing a whole map is iterative
-//   (no recursion) and frees exactly the nodes no other map holds.
+// The landmark map of one particle: a persistent, reference-counted radix tree over slots (dense
+// indices), 2^kInnerBits children per inner node, 2^kLeafBits landmarks inline per leaf. A copy
+// shares every node; a change copies the root-to-leaf path of its slot (nodes this map holds
+// alone are changed in place). Slots are stable for a landmark's life: insert takes the lowest
+// free slot, iteration is in slot order. Design and the fanout's choice: docs/memory.md.
+// Ownership: borrows its NodeHeap, which must outlive the tree and every copy of it.
+// Thread safety: thread-compatible; handles sharing nodes may be used from any threads at once
+// (atomic counts, shared nodes never written).
+// Costs (N landmarks, h = O(log N)): copy, move, size O(1); find, at O(h); edit, set O(h) with
+// up to h + 1 allocations; insert, erase O(h 2^kInnerBits); freeing is iterative and frees
+// exactly the nodes no other map holds.
 #pragma once
 
 #include <array>
-#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <iterator>
 
 #include "memory/node_heap.h"
+#include "memory/refcount.h"
 
 namespace fastslam::memory {
 
@@ -47,33 +29,14 @@ struct Landmark {
   double sxx = 0.0;  // covariance (symmetric 2x2: xx, xy, yy)
   double sxy = 0.0;
   double syy = 0.0;
-  double log_odds = 0.0;     // existence (ALGORITHM.md, eq. 73-75)
-  std::uint64_t id = 0;      // identity set by the engine, stable across copies
+  double log_odds = 0.0;       // existence (ALGORITHM.md, eq. 73-75)
+  std::uint64_t id = 0;        // identity set by the engine, stable across copies
   std::int64_t last_seen = 0;  // step of the last association
   friend bool operator==(const Landmark&, const Landmark&) = default;
 };
 static_assert(sizeof(Landmark) == 64);
 
 using Slot = std::uint32_t;
-
-// Reference count policies. `AtomicRefcount` is the default and the only one safe when maps
-// are shared across threads; `LocalRefcount` is for single-threaded use and for tests that run
-// one suite over both.
-struct AtomicRefcount {
-  std::atomic<std::uint32_t> count{1};
-  void acquire() noexcept { count.fetch_add(1, std::memory_order_relaxed); }
-  // True when this was the last reference: the caller then owns the node and frees it.
-  bool release() noexcept { return count.fetch_sub(1, std::memory_order_acq_rel) == 1; }
-  // Acquire: writes of the thread that dropped the count to one happen before ours.
-  bool unique() const noexcept { return count.load(std::memory_order_acquire) == 1; }
-};
-
-struct LocalRefcount {
-  std::uint32_t count = 1;
-  void acquire() noexcept { ++count; }
-  bool release() noexcept { return --count == 0; }
-  bool unique() const noexcept { return count == 1; }
-};
 
 // A memory policy bundle (as immer's memory_policy): the shape and the counting.
 template <unsigned InnerBits, unsigned LeafBits, class Refcount>
@@ -83,7 +46,7 @@ struct TreePolicy {
   using RefcountType = Refcount;
 };
 
-// The default: 16-way inner nodes, 4 landmarks per leaf (docs/memory.md has the measurements).
+// The default: 16-way inner nodes, 4 landmarks per leaf (docs/memory.md says why).
 using DefaultTreePolicy = TreePolicy<4, 2, AtomicRefcount>;
 
 template <class Policy>

@@ -1,21 +1,13 @@
-// Node heaps: where the nodes of the persistent landmark trees come from.
-//
-// A heap hands out fixed-size blocks to the trees and counts what is live (nodes and bytes), so
-// tests can assert that every node was freed and benchmarks can report memory. The trees take a
-// `NodeHeap&` at construction, so a test swaps the heap (failure injection, counting) without
-// touching the tree. Two heaps ship:
-//   - `MallocHeap`: straight to the process allocator (jemalloc in every executable we ship, the
-//     sanitizer's allocator under ASan/TSan), sized delete.
-//   - `PoolHeap`: per-thread free lists by block size above `MallocHeap`, so the hot path of a
-//     path copy (free a node in one step, allocate one the next) never leaves the thread.
-//
-// Ownership: a heap must outlive every block it handed out (every tree built on it). Blocks of
-// 16 bytes or more (every tree node) are 16-byte aligned; smaller ones as malloc aligns them.
-// Thread safety: `allocate`, `deallocate` and `stats` may be called from any number of threads
-// at once; a block may be freed by a thread other than the one that allocated it.
-// Costs: allocate/deallocate are O(1) and lock-free apart from what malloc does (and a short
-// lock on a thread's first use of the heap); counting is relaxed per-thread stores. `stats()`
-// takes a lock and is O(threads that ever used the heap).
+// Node heaps: where the nodes of the persistent trees come from, counted (live nodes and bytes)
+// so tests can assert that every node was freed. `MallocHeap` goes to the process allocator
+// (sized delete); `PoolHeap` keeps per-thread free lists by block size above it, so a path
+// copy's free-then-allocate stays on the thread. A tree takes a `NodeHeap&`, so tests swap in
+// failing or counting heaps.
+// Ownership: a heap must outlive every block it handed out. Blocks of 16 bytes or more are
+// 16-byte aligned.
+// Thread safety: allocate, deallocate and stats are thread-safe; a block may be freed by any
+// thread. Costs: allocate and deallocate O(1) (a short lock on a thread's first use of a
+// PoolHeap); stats() O(threads that used the heap), under a lock.
 #pragma once
 
 #include <atomic>

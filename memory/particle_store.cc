@@ -60,30 +60,40 @@ void for_blocks(std::size_t m, std::size_t grain, const Body& body) {
 
 }  // namespace
 
-ParticleStore::ParticleStore(std::size_t particles, NodeHeap& heap)
+ParticleStore::ParticleStore(std::size_t particles, NodeHeap& heap, StoreOptions options)
     : heap_(&heap),
+      options_(options),
       x_(particles, 0.0),
       y_(particles, 0.0),
       theta_(particles, 0.0),
       v_(particles, 0.0),
       omega_(particles, 0.0),
       log_weight_(particles, 0.0),
-      maps_(particles, LandmarkTree(heap)),
-      indices_(particles, SpatialIndex(heap)) {}
+      pose_cov_(options.pose_covariance == PoseCovariance::kNone ? 0 : particles * kPoseCovStride,
+                0.0),
+      maps_(particles, ParticleMap(heap, options.indexing)) {}
 
 void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t grain) {
   const std::size_t from_size = size();
   for (std::size_t k = 0; k < index.size(); ++k) {
     if (index[k] >= from_size) {
-      throw std::invalid_argument("ParticleStore::gather: index[" + std::to_string(k) + "] = " +
-                                  std::to_string(index[k]) + " is not below the particle count " +
-                                  std::to_string(from_size));
+      throw std::invalid_argument("ParticleStore::gather: index[" + std::to_string(k) +
+                                  "] = " + std::to_string(index[k]) +
+                                  " is not below the particle count " + std::to_string(from_size));
     }
   }
   const std::size_t m = index.size();
   Column nx(m), ny(m), ntheta(m), nv(m), nomega(m), nlog_weight(m);
-  std::vector<LandmarkTree> nmaps(m, LandmarkTree(*heap_));
-  std::vector<SpatialIndex> nindices(m, SpatialIndex(*heap_));
+  const bool carried = options_.pose_covariance == PoseCovariance::kCarried;
+  if (carried) pose_cov_spare_.resize(m * kPoseCovStride);
+  double* const ncov = pose_cov_spare_.data();
+  // The survivors' maps, in blocks: one allocation per gather as large as all the maps would
+  // be handed back to the system by the allocator and fault in fresh pages every time.
+  constexpr std::size_t kMapBlock = 8192;
+  std::vector<std::vector<ParticleMap>> survivors((m + kMapBlock - 1) / kMapBlock);
+  for (std::size_t b = 0; b < survivors.size(); ++b) {
+    survivors[b].assign(std::min(kMapBlock, m - b * kMapBlock), empty_map());
+  }
   if (grain == 0) grain = 1;
   for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k != end; ++k) {
@@ -94,8 +104,11 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
       nv[k] = v_[i];
       nomega[k] = omega_[i];
       nlog_weight[k] = log_weight_[i];
-      nmaps[k] = maps_[i];  // bumps the root's count
-      nindices[k] = indices_[i];
+      if (carried) {
+        std::copy_n(&pose_cov_[std::size_t{i} * kPoseCovStride], kPoseCovStride,
+                    &ncov[k * kPoseCovStride]);
+      }
+      survivors[k / kMapBlock][k % kMapBlock] = maps_[i];  // bumps the roots' counts
     }
   });
   x_.swap(nx);
@@ -104,14 +117,22 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   v_.swap(nv);
   omega_.swap(nomega);
   log_weight_.swap(nlog_weight);
-  maps_.swap(nmaps);
-  indices_.swap(nindices);
-  // The old maps and indices: each drops one reference; trees no survivor shares are freed, in
-  // parallel.
-  for_blocks(nmaps.size(), grain, [&](std::size_t begin, std::size_t end) {
+  if (carried) {
+    pose_cov_.swap(pose_cov_spare_);
+  } else if (options_.pose_covariance == PoseCovariance::kScratch) {
+    pose_cov_.resize(m * kPoseCovStride, 0.0);
+  }
+  // The old maps each drop one reference as the survivors replace them (trees no survivor
+  // shares are freed there), in parallel; maps beyond the new count are released first.
+  if (m < from_size) {
+    for_blocks(from_size - m, grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k != end; ++k) maps_[m + k].clear();
+    });
+  }
+  maps_.resize(m, empty_map());
+  for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k != end; ++k) {
-      nmaps[k].clear();
-      nindices[k].clear();
+      maps_[k] = std::move(survivors[k / kMapBlock][k % kMapBlock]);
     }
   });
 }

@@ -1,21 +1,16 @@
-// The particles of a filter, stored as columns (structure of arrays).
-//
-// Columns: pose x, y, theta; velocities v, omega (for the no-odometry models, eq. 79-81; the
-// `omega` column holds the curvature kappa for engine::MotionKind::kBrownianCurvature); the
-// log-weight; each particle's map (a persistent `LandmarkTree`, whose size is the particle's
-// landmark count); and each particle's spatial index over that map (a persistent
-// `SpatialIndex`, empty unless the engine keeps one: unknown data association). The numeric
-// columns are cache-line aligned, so loops over particles vectorise. Resampling is `gather`:
-// particle k of the result is particle index[k] of the input; a map or index is shared by
-// bumping its root's count, and every tree that no output particle holds is released exactly
-// once (by its reference count), in parallel.
-//
-// Ownership: the store owns its columns and one reference to each particle's map and index;
-// it borrows the `NodeHeap` (which must outlive it).
-// Thread safety: thread-compatible. Distinct particles (columns entries, maps) may be written
-// by distinct threads at once; `gather` and `resize` need exclusive use of the store.
-// Costs: `gather` is O(M) time plus the frees of the maps that die, runs over TBB in the
-// caller's arena, and allocates the new columns (O(M)); column access is O(1).
+// The particles of a filter, stored as columns (structure of arrays): pose x, y, theta;
+// velocities v, omega (the no-odometry models; `omega` holds the curvature for
+// engine::MotionKind::kBrownianCurvature); the log-weight; each particle's ParticleMap; and,
+// when asked for at construction, each particle's state covariance (kPoseCovStride doubles).
+// The numeric columns are cache-line aligned, so loops over particles vectorise. Resampling is
+// `gather`: particle k of the result is particle index[k] of the input, every column with it
+// (a map by bumping its roots' counts); trees no output particle holds are released, once each.
+// Ownership: the store owns its columns and one reference to each particle's map; it borrows
+// the `NodeHeap` (which must outlive it).
+// Thread safety: thread-compatible. Distinct particles (column entries, maps) may be written by
+// distinct threads at once; `gather` needs exclusive use of the store.
+// Costs: column access O(1); `gather` O(M) plus the frees of the maps that die, in parallel
+// over TBB in the caller's arena, allocating the new columns (O(M)).
 #pragma once
 
 #include <cstddef>
@@ -25,21 +20,36 @@
 
 #include <oneapi/tbb/cache_aligned_allocator.h>
 
-#include "memory/landmark_tree.h"
 #include "memory/node_heap.h"
-#include "memory/spatial_index.h"
+#include "memory/particle_map.h"
 
 namespace fastslam::memory {
+
+// What the store keeps of each particle's state covariance (FastSLAM 2.0's proposal).
+enum class PoseCovariance {
+  kNone,     // no column
+  kScratch,  // a column `gather` leaves in place: its entries matter within a step only
+  kCarried,  // a column `gather` moves with its particle
+};
+
+struct StoreOptions {
+  Indexing indexing = Indexing::kNone;  // of every particle's map
+  PoseCovariance pose_covariance = PoseCovariance::kNone;
+};
 
 class ParticleStore {
  public:
   using Column = std::vector<double, tbb::cache_aligned_allocator<double>>;
+  // Doubles per particle in the covariance column: room for the largest state (5 x 5).
+  static constexpr std::size_t kPoseCovStride = 25;
 
-  // `particles` particles at the origin with zero velocity, log-weight 0 and empty maps.
-  ParticleStore(std::size_t particles, NodeHeap& heap);
+  // `particles` particles at the origin with zero velocity, log-weight 0, empty maps and (when
+  // kept) zero covariances.
+  ParticleStore(std::size_t particles, NodeHeap& heap, StoreOptions options = {});
 
   std::size_t size() const noexcept { return maps_.size(); }
   NodeHeap& heap() const noexcept { return *heap_; }
+  const StoreOptions& options() const noexcept { return options_; }
 
   std::span<double> x() noexcept { return x_; }
   std::span<double> y() noexcept { return y_; }
@@ -53,14 +63,16 @@ class ParticleStore {
   std::span<const double> v() const noexcept { return v_; }
   std::span<const double> omega() const noexcept { return omega_; }
   std::span<const double> log_weight() const noexcept { return log_weight_; }
+  // Particle i's covariance is [i * kPoseCovStride, (i + 1) * kPoseCovStride); empty when the
+  // store keeps none.
+  std::span<double> pose_cov() noexcept { return pose_cov_; }
+  std::span<const double> pose_cov() const noexcept { return pose_cov_; }
 
-  LandmarkTree& map(std::size_t particle) noexcept { return maps_[particle]; }
-  const LandmarkTree& map(std::size_t particle) const noexcept { return maps_[particle]; }
-  SpatialIndex& index(std::size_t particle) noexcept { return indices_[particle]; }
-  const SpatialIndex& index(std::size_t particle) const noexcept { return indices_[particle]; }
-  std::size_t landmark_count(std::size_t particle) const noexcept {
-    return maps_[particle].size();
-  }
+  ParticleMap& map(std::size_t particle) noexcept { return maps_[particle]; }
+  const ParticleMap& map(std::size_t particle) const noexcept { return maps_[particle]; }
+  // An empty map of this store's heap and indexing.
+  ParticleMap empty_map() const noexcept { return ParticleMap(*heap_, options_.indexing); }
+  std::size_t landmark_count(std::size_t particle) const noexcept { return maps_[particle].size(); }
 
   // Resampling: afterwards particle k is a copy of former particle index[k], for every k, and
   // the store holds index.size() particles. Throws std::invalid_argument naming the first bad
@@ -70,9 +82,11 @@ class ParticleStore {
 
  private:
   NodeHeap* heap_;
+  StoreOptions options_;
   Column x_, y_, theta_, v_, omega_, log_weight_;
-  std::vector<LandmarkTree> maps_;
-  std::vector<SpatialIndex> indices_;
+  Column pose_cov_;
+  Column pose_cov_spare_;  // kCarried: the gather's target, kept to reuse its allocation
+  std::vector<ParticleMap> maps_;
 };
 
 }  // namespace fastslam::memory

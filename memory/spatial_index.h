@@ -1,61 +1,19 @@
-// The spatial index of one particle's map: "landmarks within distance d of this point" and
-// "landmarks inside this sensor footprint" in O(log N + k), persistent like the landmark tree.
-//
-// Design note (FastSLAM paper, section 8; docs/spatial-index.md has the measurements). Data
-// association needs, per particle and observation, the landmarks near the predicted
-// observation, and negative information needs the landmarks inside the sensor's footprint; a
-// scan of the map is O(N) per query. The index is a bucketed region quadtree over the plane:
-//   - a node covers a square of side 2^level metres (level an integer; every cell boundary is
-//     an exact double, so which child holds a point is decided exactly); an inner node has
-//     4^kLevelsPerNode children (a 4-way quadtree, or 16-way: two quadtree levels per node,
-//     which halves the depth); a leaf holds up to kLeafCapacity entries (slot, extent, x, y)
-//     inline;
-//   - a leaf that overflows splits (recursively, until every part fits), unless its square is
-//     at the minimum size (side 2^kMinLevel, or the finest side at which its boundaries are
-//     still exact doubles); such a leaf grows instead, up to kMaxLeafEntries entries (points
-//     closer than a quarter millimetre: duplicates, in practice);
-//   - an inner node whose subtree falls to kLeafCapacity / 2 entries or fewer (on erase or
-//     move) merges back into one leaf;
-//   - the root square is [-h, h)^2, centred on the origin, and every other square is aligned
-//     (its corner a multiple of its side), so a node's square does not depend on the history.
-//     When an entry falls outside, the root grows by 2^kLevelsPerNode (its children go one
-//     level down under four new quadrant nodes), so the world need not be known in advance;
-//     it shrinks back when the entries allow, so the depth follows the live map's extent.
-// Persistence is the landmark tree's: copying an index copies a root pointer (O(1)); a change
-// copies the root-to-leaf path of the entry and shares every other subtree; a node whose
-// reference count is one belongs to this index alone and is changed in place. A leaf's entries
-// are exact, so queries are exact whatever moved (loop closures move landmarks by metres: the
-// entry leaves its cell and is re-inserted where it now is).
-//
-// Coordinates: finite, |x|, |y| <= kMaxCoordinate (1e150, so squared distances cannot
-// overflow). Distances are Euclidean, compared squared: an entry is within `radius` of (qx, qy)
-// when (x - qx)^2 + (y - qy)^2 <= radius^2, evaluated in double as written.
-// Slots: the index does not check that a slot is inserted once; the engine stores each
-// landmark once, at its mean, and tells the index where it was when it moves or is removed.
-//
-// Ownership: an index borrows its `NodeHeap`, which must outlive it and every copy of it.
-// Visitors are borrowed for the call only.
-// Thread safety: a handle is thread-compatible (const methods may run concurrently; a mutating
-// method needs exclusive use of that handle). Handles that share nodes may be copied, queried,
-// changed and destroyed from any threads at once: counts are atomic (relaxed increment,
-// acquire-release decrement) and a shared node is never written, only copied. A visitor must
-// not change the index it is visiting.
-// Costs (N entries, h = depth = O(log N) for points not closer than the minimum cell, B =
-// kLeafCapacity, W = 4^kLevelsPerNode):
-//   copy, move, size, empty: O(1), no allocation.
-//   within, within_reach, in_footprint: O(h + k + boxes touched), no allocation; the footprint
-//     is the disc query filtered by bearing (boxes are pruned by distance only; a dot product
-//     decides the bearing, atan2 only within 1e-9 of the edge); within_reach
-//     also skips the leaves its widest entry's reach misses.
-//   nearest: O(h + k log k) typically (branch and bound), no allocation.
-//   insert: O(h + B) plus a split (O(B) nodes at most); copies the shared nodes on its path.
-//   erase: O(h + B) plus a merge (O(B * W) when it happens); copies the shared nodes on its
-//     path; never fails after it started changing the index (a merge that cannot allocate is
-//     skipped, the index stays correct).
-//   move: as erase + insert; one path copy, in place, when the old and new positions share a
-//     leaf's square.
-//   destruction: O(1) while other handles share the root; freeing is iterative (no recursion,
-//     no allocation) and frees exactly the nodes no other index holds.
+// The spatial index of one particle's map: a persistent bucketed region quadtree over (slot,
+// x, y, extent) entries, answering "entries within distance d" (also in batches, and pruned by
+// each entry's reach), "entries in a sensor footprint" and "k nearest" exactly. Copies share
+// nodes and changes copy paths, as the landmark tree (memory/landmark_tree.h); node squares
+// are aligned powers of two, so their boundaries are exact doubles. Design: docs/spatial-index.md.
+// Coordinates finite, |x|, |y| <= kMaxCoordinate; distances are compared squared, in double as
+// written. The index does not check that a slot is entered once (memory/particle_map.h keeps
+// one entry per landmark).
+// Ownership: borrows its NodeHeap, which must outlive it and every copy; visitors are borrowed
+// for the call. Thread safety: thread-compatible; handles sharing nodes may be used from any
+// threads at once; a visitor must not change the index it visits.
+// Costs (N entries, h = O(log N), B = kLeafCapacity, W = 4^kLevelsPerNode): copy O(1);
+// within, within_reach, in_footprint O(h + k + boxes touched), nearest O(h + k log k)
+// typically, no allocation; insert O(h + B) plus a split; erase O(h + B) plus a merge
+// (O(B W)), never failing once it started changing; move as erase + insert (in place within a
+// leaf). Changes allocate path copies and split nodes only.
 #pragma once
 
 #include <cmath>
@@ -63,8 +21,9 @@
 #include <cstdint>
 #include <span>
 
-#include "memory/landmark_tree.h"  // Slot, AtomicRefcount, LocalRefcount
+#include "memory/landmark_tree.h"  // Slot
 #include "memory/node_heap.h"
+#include "memory/refcount.h"
 
 namespace fastslam::memory {
 
@@ -89,7 +48,7 @@ struct SpatialPolicy {
   using RefcountType = Refcount;
 };
 
-// The default: 4-way nodes, leaves of 16 entries (docs/spatial-index.md has the measurements).
+// The default: 4-way nodes, leaves of 16 entries (docs/spatial-index.md says why).
 using DefaultSpatialPolicy = SpatialPolicy<1, 16, AtomicRefcount>;
 
 template <class Policy>
@@ -100,7 +59,7 @@ class BasicSpatialIndex {
   static constexpr unsigned kLeafCapacity = Policy::kLeafCapacity;
   static_assert(kLevelsPerNode >= 1 && kLevelsPerNode <= 3);
   static_assert(kLeafCapacity >= 2 && kLeafCapacity <= 256);
-  // Finest cell side: 2^kMinLevel metres (0.24 mm).
+  // Finest cell side: 2^kMinLevel metres.
   static constexpr int kMinLevel = -12;
   // Entries one leaf at the finest size may hold (points closer than the finest cell).
   static constexpr std::uint32_t kMaxLeafEntries = 1u << 20;
@@ -271,7 +230,7 @@ class BasicSpatialIndex {
     return x >= cell.x && x < cell.x + cell.side && y >= cell.y && y < cell.y + cell.side;
   }
   // The child of `cell` holding (x, y), and its index; exact comparisons against boundaries.
-  // (Inlined: a call per level was most of a descent's cost.)
+  // Always inlined: it runs once per level of every descent.
   [[gnu::always_inline]] static inline unsigned child_of(const Cell& cell, double x, double y,
                                                          Cell& child) noexcept;
   [[gnu::always_inline]] static inline Cell child_cell(const Cell& cell, unsigned index) noexcept;
@@ -356,4 +315,6 @@ extern template class BasicSpatialIndex<SpatialPolicy<1, 8, LocalRefcount>>;
 
 }  // namespace fastslam::memory
 
-#include "memory/internal/spatial_index_impl.h"
+#include "memory/internal/spatial_index_changes.h"
+#include "memory/internal/spatial_index_nodes.h"
+#include "memory/internal/spatial_index_queries.h"

@@ -1,56 +1,18 @@
 // The per-particle kernel: the one way the engine runs "for every particle do X" in parallel.
-//
-// A `ParticleKernel` is built from the filter's configuration `{threads, grain}`. It owns a
-// `tbb::task_arena` of `threads` slots, so every parallel loop it runs (and every TBB algorithm
-// run through `execute`, such as `ParticleStore::gather`) uses at most that many threads,
-// whatever other code in the process does. Work is cut into blocks of the structure-of-arrays
-// store:
-//   - `for_each_block(count, body)`: body(begin, end) on consecutive chunks of `grain` particles
-//     (the last one shorter). The chunks are the same for every thread count; only which thread
-//     runs which chunk changes.
-//   - `for_each_block(count, scratch, body)`: the same with per-thread scratch (`ThreadScratch`,
-//     a `tbb::enumerable_thread_specific` with a cache-aligned allocator) that survives calls, so
-//     buffers are allocated once per thread, not once per block.
-//   - `for_each_fixed_block(count, block, body)`: body(block_index, begin, end) on blocks of
-//     exactly `block` particles, whatever the grain; the grain only decides how many blocks one
-//     task runs. This is the building block of deterministic reductions and scans.
-//   - `reduce(count, identity, map_block, combine)`: a deterministic reduction. Its shape is
-//     fixed by `count` and `kReduceBlock` alone: map_block runs on blocks of kReduceBlock
-//     particles (in parallel), then the block results are folded left to right on the calling
-//     thread. The result is therefore bit-identical for any thread count and any grain, which
-//     `tbb::parallel_reduce` (whose tree follows the scheduler's splitting) does not promise.
-//   - `execute(f)`: runs f inside the arena (for TBB algorithms that the kernel does not wrap).
-//   - `BackgroundTask` (below): one task at a time on the kernel's threads while the caller
-//     goes on, e.g. the next pass's random numbers computed during this pass.
-//
-// Small inputs (a single task's worth of blocks) and one-thread kernels run inline on the
-// calling thread, without entering the arena, so the kernel costs a few nanoseconds there. A
-// body that wants nested parallelism should therefore use the kernel's methods (or `execute`),
-// not raw TBB calls: those would run in whatever arena the caller is in.
-//
-// ThreadSanitizer builds: Debian's TBB is not instrumented, so TSan reports false races on data
-// handed to TBB tasks. Under TSan the kernel therefore runs its blocks on plain std::threads
-// (`internal::thread_fork_join`, `threads` of them, the same block shapes), and `execute` runs
-// f in a one-slot arena (TBB algorithms inside run on the calling thread only).
-//
-// Ownership: the kernel owns its arena (and, when `threads` exceeds the machine's default
-// concurrency, a `tbb::global_control` that raises the process-wide worker limit to `threads`
-// for the kernel's lifetime; it never lowers it). Bodies are borrowed for the call only.
-// Thread safety: a kernel is thread-safe: its const methods may be called from several threads
-// at once (the calls share the arena's threads). A `ThreadScratch` is handed out one element per
-// thread; `for_each` / `clear` on it need exclusive use (no kernel call using it in flight).
-// What runs concurrently: within one call, the body is invoked concurrently from up to
-// `threads` threads on disjoint ranges, through one shared const reference to the body object
-// (hence the concepts below require const-invocability). Bodies must not write shared state
-// other than the elements of their own range, except through per-thread scratch or atomics.
-// Exceptions: when a body throws, the call rethrows one of the exceptions after the other
-// running blocks finished; blocks not yet started may be skipped.
-// Costs: a parallel call costs one arena entry plus one task per `grain` particles: about
-// 0.3 us when the workers are spinning (BM_ParticleKernelEmpty, 2 threads: 10^3 empty bodies in
-// 0.56 us against 0.30 us inline; 10^5 in 16.7 us against 28.9 us). A worker that fell asleep
-// (after about a millisecond without parallel work on the 2-core VM) can take hundreds of
-// microseconds to join, the calling thread working meanwhile. Inline calls cost nothing beyond
-// the body. `reduce` allocates ceil(count / kReduceBlock) results.
+// It owns a tbb::task_arena of `threads` slots and cuts work into blocks of `grain` particles:
+// for_each_block (optionally with per-thread ThreadScratch), for_each_fixed_block, a
+// deterministic reduce (fixed blocks of kReduceBlock folded left to right: the same bits for
+// any thread count and grain), execute (a TBB algorithm inside the arena) and BackgroundTask.
+// Small inputs and one-thread kernels run inline. Under ThreadSanitizer the blocks run on plain
+// std::threads (internal/thread_fork_join.h). Design notes: docs/parallel.md.
+// Ownership: owns its arena (and may raise TBB's worker limit for its lifetime, never lower
+// it); bodies are borrowed for the call.
+// Thread safety: thread-safe (const calls from several threads share the arena). A body runs
+// concurrently on disjoint ranges through one const reference and must write only its own
+// range, per-thread scratch or atomics; when a body throws, the call rethrows one exception
+// after the running blocks finished.
+// Costs: a parallel call is one arena entry plus one task per grain (O(count / grain)); inline
+// calls cost only the body; reduce allocates ceil(count / kReduceBlock) results.
 #pragma once
 
 #include <algorithm>
@@ -93,10 +55,9 @@ struct KernelConfig {
   // Threads the kernel may use, the caller included. 0: the machine's default concurrency
   // (tbb::info::default_concurrency(), which honours the process's CPU affinity mask).
   unsigned threads = 0;
-  // Particles per task (>= 1). Smaller grains balance better and cost more scheduling. 512
-  // measured best for systematic resampling on the 2-core machine (a few ns per particle; see
-  // BM_SystematicResampleGrain); phases costing microseconds per particle want smaller grains
-  // (pass one per call).
+  // Particles per task (>= 1). Smaller grains balance better and cost more scheduling; the
+  // default suits phases of nanoseconds per particle such as resampling (docs/parallel.md);
+  // phases costing microseconds per particle want smaller grains (pass one per call).
   std::size_t grain = 512;
 };
 
@@ -302,8 +263,8 @@ class ParticleKernel {
 // builds f runs on a std::thread (see the file comment). What f writes may be read after
 // wait(); nothing it touches may be used by the caller in between.
 // Thread safety: one owner thread calls start and wait. Costs: start is an arena entry and a
-// spawn (a parallel call costs about 0.3 us with spinning workers, above; a sleeping worker may
-// take longer to pick f up, and the owner's wait then runs it); no allocation beyond f's copy.
+// spawn (a sleeping worker may take longer to pick f up; the owner's wait then runs it); no
+// allocation beyond f's copy.
 class BackgroundTask {
  public:
   explicit BackgroundTask(const ParticleKernel& kernel) : kernel_(&kernel) {}

@@ -41,7 +41,7 @@ constexpr std::size_t kTailLanes = 4;
 // this file's -fno-math-errno (parallel/CMakeLists.txt) turns into one instruction in both
 // paths (with errno semantics it would not vectorise; the argument is never negative anyway,
 // so errno is never set). random_stream_test checks the composite Box-Muller pair (within 8
-// ulp of max(r, 1); measured 1.4).
+// ulp of max(r, 1)).
 
 using internal::log_positive;
 using internal::sincos_turns;

@@ -1,64 +1,15 @@
-// Deterministic random streams keyed by (seed, step, particle, purpose).
-//
-// Every random number the filter draws is a pure function of where it is used: the run's seed,
-// the control step, the particle and what the draw is for (`Purpose`), plus its position in that
-// stream. Nothing is shared between threads and nothing depends on the order in which particles
-// are processed, so a run with the same seed is bit-identical for 1, 2 or N threads, any block
-// size and any TBB scheduling. There is no global generator anywhere; callers construct a
-// `RandomStream` (a value on the stack) or call the batch functions for a block of particles.
-//
-// Generator: Philox4x32-10 (Salmon, Moraes, Dror, Shaw, SC'11; parallel/internal/philox.h). Why:
-//   - counter-based: a block is a pure function f(counter, key), so any (seed, step, particle,
-//     purpose, position) is reached in O(1) with no state to share, split or jump ahead - the
-//     access pattern of a particle filter processed in parallel blocks in any order;
-//   - statistically strong: "Crush-resistant" - the authors report that Philox4x32 passes all of
-//     TestU01's SmallCrush, Crush and BigCrush from 7 rounds on (10 is their default, a safety
-//     margin), with counters that are incremented in any one word and with many distinct keys,
-//     i.e. exactly the structured, neighbouring counters fed here;
-//   - cheap: ten rounds of two 32x32->64 multiplies per 128 bits, and independent blocks
-//     vectorise side by side (the batch functions do that, 16 blocks at a time).
-// A keyed SplitMix/PCG would be as fast, but its quality for highly structured keys (particle k
-// vs k + 1, step s vs s + 1) would rest on an ad-hoc mixer; Philox's has been tested for that.
-//
-// Key layout. Philox key = the 64-bit seed (low word first). Counter words:
-//   c0 = block index within the stream (each block = 128 bits = four 32-bit words),
-//   c1 = particle, c2 = step bits 0..31, c3 = purpose (8 bits) << 24 | step bits 32..55.
-// Limits (REQUIRES, checked by assert in debug builds): step < 2^56; purpose < 256; at most
-// 2^32 blocks = 2^34 32-bit words (2^33 uniforms or normals) per stream; for the batch functions
-// first_particle + count <= 2^32. Within them, distinct (key, position) pairs are distinct Philox
-// inputs (counter, key), so no two draws are ever copies of each other by construction.
-//
-// Draws. A stream is a sequence of 32-bit words (block b gives words 4b..4b+3).
-//   next_u32: the next word. next_u64: the next two words w, w' as w | w' << 32.
-//   uniform: next_u64() >> 11 times 2^-53, in [0, 1) (53 random bits; 1.0 is never returned).
-//   uniform_pos: (next_u64() >> 11 | 1) times 2^-53, in (0, 1): 52 random bits, odd multiples of
-//     2^-53, symmetric about 1/2; never 0 or 1, so log() is safe.
-//   normal: Box-Muller. A pair (a, b) = two next_u64() gives r = sqrt(-2 ln u1) with
-//     u1 = ((a >> 11) + 1) 2^-53 in (0, 1] and theta = 2 pi (b >> 11) 2^-53; the first normal()
-//     returns r cos(theta) and keeps r sin(theta) for the next call. So normal j of a fresh stream
-//     comes from block j / 2 alone (cos for even j, sin for odd j): a fixed number of bits per
-//     normal, which keeps every draw randomly addressable and lets the batch functions vectorise
-//     over blocks. A ziggurat is faster per scalar draw but consumes a variable number of words
-//     (rejection), which breaks both properties; vectorised, Box-Muller costs about as much as
-//     the Philox block it consumes. |normal()| <= sqrt(2 * 53 ln 2) ~ 8.57.
-//   The log, sin and cos are our own (parallel/internal/vmath.h; the pair's error is ~1.5 ulp
-//   of max(r, 1), tested against long-double libm): IEEE-754 +, *, / and fma on explicit
-//   operations, no libm and nothing for -ffp-contract to fuse; the sqrt is IEEE-754's correctly
-//   rounded one (a single instruction: random_stream.cc is compiled with -fno-math-errno, so it
-//   vectorises and never calls libm). So the scalar and the vectorised paths give the same bits
-//   (tested) and results do not depend on the C library. They do depend on whether the
-//   target has a fast fma (a build with -march=native on an FMA machine and a generic x86-64
-//   build may differ in the last bits of a normal); words and uniforms are identical everywhere.
-//
-// Thread safety: `RandomStream` is thread-compatible (a value; use one per task or per
-// particle). The batch functions are pure and may run concurrently on disjoint outputs.
-// Costs: constructing a stream is O(1) (about 180 bytes, no allocation); a draw is O(1)
-// amortised; nothing here allocates. Single thread, AVX-512 (EPYC), g++ 12 -O3 -march=native
-// (bench/parallel/random_stream_benchmark.cc): normals_for_particles ~360 M normals/s for an
-// even per_particle, from blocks of 8 particles up; normal_pairs_for_particles (Philox and
-// Box-Muller fused) ~480 M/s in long runs, ~430 M/s in the filter's shape (blocks of 16
-// particles, 9 steps per call); fill_normal ~450 M/s; scalar normal() ~145 M/s. Uniforms: fill
-// ~880 M/s, uniforms_for_particles ~540 M/s (per_particle = 4), scalar uniform() ~290 M/s.
+// Deterministic random streams keyed by (seed, step, particle, purpose): every draw is a pure
+// function of where it is used, so a run is bit-identical for any thread count and schedule.
+// No global generator: callers construct a RandomStream (a value) or call the batch functions
+// for a block of particles. Generator: Philox4x32-10 (Salmon et al., SC'11;
+// internal/philox.h); uniforms from 53 bits, normals by Box-Muller with our own log, sin and
+// cos (internal/vmath.h), so scalar and vectorised paths give the same bits. Key layout,
+// limits, draw definitions and the generator's choice: docs/parallel.md.
+// REQUIRES: step < 2^56, purpose < 256, at most 2^32 blocks per stream, first_particle + count
+// <= 2^32 for the batch functions.
+// Thread safety: RandomStream is thread-compatible (one per task or particle); the batch
+// functions are pure and may run concurrently on disjoint outputs.
+// Costs: constructing a stream O(1); a draw O(1) amortised; nothing allocates.
 #pragma once
 
 #include <array>

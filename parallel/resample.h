@@ -1,73 +1,18 @@
 // Resampling and weight statistics: log-sum-exp normalisation, the effective sample size, the
-// policy that decides when to resample, and systematic, stratified and multinomial draws.
-//
-// Design note. FastSLAM resamples every step (ALGORITHM.md, step 4; the paper, eq. 28); many
-// users resample only when N_eff = 1 / sum w_i^2 drops below a fraction of M. Weights are kept
-// as log-weights l_i and normalised with log-sum-exp: with m = max l_i, e_i = exp(l_i - m)
-// (so the largest is 1 and nothing underflows as a whole), S = sum e_i, w_i = e_i / S,
-// log-sum = m + log S, N_eff = S^2 / sum e_i^2.
-//
-// All three schemes share one code path: they produce N sorted pointers p_k in [0, 1) and one
-// merge of the pointers against the cumulative weights picks, for each k, the first particle
-// whose cumulative weight exceeds p_k:
-//   systematic   p_k = (u + k) / N,   one u ~ U[0, 1) from the stream (seed, step, particle 0,
-//                Purpose::kResample).
-//   stratified   p_k = (u_k + k) / N, u_k the first uniform of stream (seed, step, k, kResample).
-//   multinomial  p_k = G_k / G_N with G_k = E_0 + ... + E_k and E_j = -log(1 - u_j) ~ Exp(1)
-//                (u_j from stream (seed, step, j, kResample), j = 0..N): the sorted order
-//                statistics of N uniforms, generated in O(N) without sorting.
-// The merge runs in parallel by chunks of outputs. A chunk finds its first particle by one
-// binary search, then visits the particles whose answers fall in it; for each it finds the first
-// pointer at or above its cumulative weight (in closed form for systematic and stratified, up
-// to an exact correction; by walking the pointers for multinomial) and counts, and a running
-// sum of the counts gives the chunk's indices. No data-dependent branch per output for
-// systematic, which halves the cost of the textbook walk. Every index is a pure function of the
-// cumulative weights and the pointers, so any chunking gives the textbook merge's result.
-//
-// Determinism (the crux). The cumulative weights C_i are defined by a fixed-shape scan: the
-// particles are cut into blocks of K = ParticleKernel::kReduceBlock; within block b the local
-// prefix L_i runs from 0 left to right; block offsets are O_0 = 0, O_{b+1} = O_b + L_last(b)
-// (sequentially); and C_i = O_b + L_i. Every value is a fixed sequence of IEEE operations, so C
-// is bit-identical for any thread count and grain, and equal to what the sequential reference
-// `draw_ancestors_sequential` computes. The scan is also monotone (C_{i+1} >= C_i) and a particle
-// of weight zero has C_i == C_{i-1} exactly, so it is never drawn. The exponential spacings of
-// the multinomial scheme use the same scan. Sums of squares and the weighted mean pose use the
-// same blocks, folded left to right.
-// Selection rule: particle(k) = the first i with C_i > p_k * T (T = C_{M-1}, the total), or,
-// when rounding makes p_k * T >= T, the first i with C_i == T (the last particle of positive
-// weight, which is what exact arithmetic would pick). Indices come out sorted ascending.
-//
-// Degenerate input (documented choice):
-//   - no particles: std::invalid_argument.
-//   - NaN or +inf log-weight anywhere: std::invalid_argument naming the first such particle.
-//     A NaN is a bug upstream; +inf is not a weight (it would make every other weight 0/inf).
-//   - every log-weight -inf (all weights zero): std::domain_error. We do not silently reset to
-//     uniform: a filter in which every particle has zero likelihood has met an observation its
-//     models call impossible (an outlier, a wrong noise setting, a gating bug); resampling
-//     uniformly would hide that and keep going on a meaningless posterior. The error is raised
-//     before anything changes, so the caller (the engine) can choose to skip the observation,
-//     reset the weights itself (`reset_log_weights`), or stop.
-//   - one particle: fine (N_eff = 1, every draw picks it).
-//   - more than 2^32 - 1 particles (indices are 32-bit): std::length_error.
-// Individual weights may underflow: e_i is computed by internal::exp_nonpositive (our own exp,
-// within 2 ulp, the same bits on every machine and C library), which gives exactly 0 below
-// e^-708 relative to the largest weight; such particles are never drawn.
-//
-// Ownership: a `Resampler` borrows its `ParticleKernel` (which must outlive it) and owns its
-// scratch buffers (reused across calls; they grow to the largest M seen). The free functions
-// borrow their spans for the call only.
-// Under ThreadSanitizer builds the kernel's `execute` has one slot (particle_kernel.h), so the
-// gather inside `resample` then runs on the calling thread.
-// Thread safety: a `Resampler` is thread-compatible (one call at a time per object; the calls
-// run in parallel internally on the kernel's threads). The free functions are thread-safe.
-// Costs (M particles, N draws): summary O(M) with one exp per particle; a draw O(M + N), plus
-// O(N) uniforms (and logs) for stratified/multinomial; `resample` adds
-// ParticleStore::gather (O(M) plus freeing the maps that die). Allocation: the Resampler's
-// buffers on first use at a given size; the free functions allocate O(M) each call.
-// Measured (BM_SystematicResample, summary + systematic draw, 2-core EPYC VM, -O3 -march=native,
-// grain 512): about 6 ns per particle on one thread for M = 10^4 .. 10^6 (0.66 us at M = 100);
-// two threads 1.05x at M = 10^3, 1.75x at 10^4, 1.94x at 10^5, 2.0x at 10^6; M <= grain runs
-// inline (1.0x).
+// policy deciding when to resample, and systematic, stratified and multinomial draws, all by
+// one merge of sorted pointers against cumulative weights. The cumulative weights come from a
+// fixed-shape scan (blocks of ParticleKernel::kReduceBlock), so every result is bit-identical
+// for any thread count and grain and equal to draw_ancestors_sequential. Ancestor indices come
+// out sorted. Degenerate input: no particles, a NaN or +inf log-weight: std::invalid_argument;
+// every weight zero: std::domain_error, before anything changes; more than 2^32 - 1 particles:
+// std::length_error. Design and the selection rule: docs/parallel.md.
+// Ownership: a Resampler borrows its ParticleKernel (which must outlive it) and owns scratch
+// buffers reused across calls; the free functions borrow their spans for the call.
+// Thread safety: a Resampler is thread-compatible (calls run in parallel internally); the free
+// functions are thread-safe.
+// Costs (M particles, N draws): summary O(M), one exp each; a draw O(M + N) (plus O(N)
+// uniforms for stratified and multinomial); resample adds ParticleStore::gather. The
+// Resampler allocates only when M grows; the free functions allocate O(M) per call.
 #pragma once
 
 #include <cstddef>

@@ -45,7 +45,8 @@ void BM_ParticleStoreGather(benchmark::State& state) {
   LandmarkTree base(heap);
   for (std::uint64_t s = 0; s < n; ++s) base.insert(Landmark{});
   ParticleStore store(m, heap);
-  for (std::size_t k = 0; k < m; ++k) store.map(k) = base;
+  const ParticleMap base_map(base, Indexing::kNone, [](const Landmark&) { return 0.0f; });
+  for (std::size_t k = 0; k < m; ++k) store.map(k) = base_map;
   const std::vector<std::uint32_t> index = resample_index(m, 7);
   std::mt19937_64 rng(3);
   tbb::global_control workers(tbb::global_control::max_allowed_parallelism,
@@ -56,8 +57,10 @@ void BM_ParticleStoreGather(benchmark::State& state) {
       if (edited) {  // the same state before every gather: base + 10 own paths per particle
         state.PauseTiming();
         for (std::size_t k = 0; k < m; ++k) {
-          store.map(k) = base;
-          for (int u = 0; u < 10; ++u) store.map(k).edit(static_cast<Slot>(rng() % n)).x += 1.0;
+          store.map(k) = base_map;
+          for (int u = 0; u < 10; ++u) {
+            store.map(k).edit_unindexed(static_cast<Slot>(rng() % n)).x += 1.0;
+          }
         }
         state.ResumeTiming();
       }

@@ -79,7 +79,7 @@ void BM_ResampleStore(benchmark::State& state) {
   const std::vector<double> l = log_weights(m);
   for (std::size_t i = 0; i < m; ++i) {
     for (int k = 0; k < 8; ++k) {
-      store.map(i).insert({.x = static_cast<double>(i)});
+      store.map(i).insert({.x = static_cast<double>(i)}, 0.0f);
     }
   }
   Resampler resampler({}, kernel);

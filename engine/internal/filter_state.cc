@@ -4,8 +4,20 @@
 
 namespace fastslam::engine::internal {
 
+memory::StoreOptions store_options(const FilterConfig& c) {
+  memory::StoreOptions o;
+  o.indexing =
+      c.association == Association::kKnown ? memory::Indexing::kNone : memory::Indexing::kSpatial;
+  if (c.algorithm == Algorithm::kFastSlam2) {
+    o.pose_covariance = without_odometry(c.motion.kind) ? memory::PoseCovariance::kCarried
+                                                        : memory::PoseCovariance::kScratch;
+  }
+  return o;
+}
+
 FilterState::FilterState(const FilterConfig& c)
-    : config(c), store(c.particles, heap), covariances(c.particles), sensor(c.sensor.offset) {
+    : config(c), store(c.particles, heap, store_options(c)), covariances(store),
+      sensor(c.sensor.offset) {
   r << c.sensor.sigma_range * c.sensor.sigma_range, 0, 0,
       c.sensor.sigma_bearing * c.sensor.sigma_bearing;
   const double log_m = -std::log(static_cast<double>(c.particles));

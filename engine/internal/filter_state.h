@@ -37,6 +37,11 @@ struct FilterCounters {
   double observe_wall_seconds = 0.0;
 };
 
+// The store a configuration needs: a spatial index per map for unknown association (known ids
+// find landmarks by slot); FastSLAM 2.0's covariances, carried through resampling without
+// odometry, where the velocities' covariance outlives the scan (draw_state).
+memory::StoreOptions store_options(const FilterConfig& config);
+
 struct FilterState {
   // REQUIRES: validate(config) passed.
   explicit FilterState(const FilterConfig& c);

@@ -109,12 +109,12 @@ void update_block_known(const KnownInput& in, const std::vector<PlannedObservati
         stored.log_odds = in.existence.initial;
         stored.id = o.id;
         stored.last_seen = step_now;
-        store.map(begin + l).insert(stored);
+        store.map(begin + l).insert(stored, 0.0f);  // unindexed: no extent
       }
       continue;
     }
     for (std::size_t l = 0; l < count; ++l) {
-      memory::Landmark& stored = store.map(begin + l).edit(o.slot);
+      memory::Landmark& stored = store.map(begin + l).edit_unindexed(o.slot);
       scratch.edited[l] = &stored;
       lm.x[l] = stored.x;
       lm.y[l] = stored.y;

@@ -15,27 +15,27 @@ void update_chosen(const MapUpdateInput& in, const Pose& pose,
                    const std::vector<PlannedObservation>& scan,
                    std::span<const std::int64_t> assignment,
                    std::span<const LandmarkObservation> terms,
-                   std::span<const std::uint32_t> chosen_terms, memory::LandmarkTree& map,
-                   memory::SpatialIndex& index, std::vector<memory::Slot>& touched) {
+                   std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
+                   std::vector<memory::Slot>& touched) {
   const auto step_now = static_cast<std::int64_t>(in.scan_step);
   touched.clear();
   for (std::size_t j = 0; j < scan.size(); ++j) {
     if (assignment[j] == kNewLandmark) continue;
     const auto slot = static_cast<memory::Slot>(assignment[j]);
-    memory::Landmark& stored = map.edit(slot);
-    const double from_x = stored.x, from_y = stored.y;
-    LandmarkGaussian lm = to_gaussian(stored);
-    if constexpr (kFs2) {
-      apply_update(lm, evaluate_observation(*in.sensor, lm, pose, scan[j].z, in.r), in.r);
-    } else {
-      apply_update(lm, terms[chosen_terms[j]], in.r);
-    }
-    store_gaussian(lm, stored);
-    stored.log_odds += in.existence.seen;
-    stored.last_seen = step_now;
-    if (stored.x != from_x || stored.y != from_y) {
-      index.move(slot, from_x, from_y, stored.x, stored.y, largest_variance(stored));
-    }
+    map.update(
+        slot,
+        [&](memory::Landmark& stored) {
+          LandmarkGaussian lm = to_gaussian(stored);
+          if constexpr (kFs2) {
+            apply_update(lm, evaluate_observation(*in.sensor, lm, pose, scan[j].z, in.r), in.r);
+          } else {
+            apply_update(lm, terms[chosen_terms[j]], in.r);
+          }
+          store_gaussian(lm, stored);
+          stored.log_odds += in.existence.seen;
+          stored.last_seen = step_now;
+        },
+        largest_variance);
     touched.push_back(slot);
   }
 }
@@ -43,12 +43,12 @@ void update_chosen(const MapUpdateInput& in, const Pose& pose,
 // Negative information: the landmarks in the footprint and not touched lose `missed` log-odds
 // and are removed below the bound, in slot order (independent of the index's leaf order).
 void apply_negative_information(const MapUpdateInput& in, const Pose& pose,
-                                memory::LandmarkTree& map, memory::SpatialIndex& index,
-                                MapUpdateScratch& scratch, MapUpdateCounts& counts) {
+                                memory::ParticleMap& map, MapUpdateScratch& scratch,
+                                MapUpdateCounts& counts) {
   const ExistenceConfig& ex = in.existence;
   const Eigen::Vector2d at = in.sensor->sensor_position(pose);
   scratch.in_view.clear();
-  index.in_footprint(at[0], at[1], pose[2] + in.sensor->offset().yaw,
+  map.index().in_footprint(at[0], at[1], pose[2] + in.sensor->offset().yaw,
                      in.max_range - ex.range_margin, in.field_of_view,
                      [&](const memory::SpatialEntry& e) {
                        if (std::find(scratch.touched.begin(), scratch.touched.end(), e.slot) ==
@@ -62,11 +62,11 @@ void apply_negative_information(const MapUpdateInput& in, const Pose& pose,
   for (const memory::SpatialEntry& e : scratch.in_view) {
     const double log_odds = map.at(e.slot).log_odds - ex.missed;
     if (log_odds < ex.remove_below) {
-      index.erase(e.slot, e.x, e.y);
       map.erase(e.slot);
       ++counts.removed;
     } else {
-      map.edit(e.slot).log_odds = log_odds;
+      map.update(
+          e.slot, [&](memory::Landmark& stored) { stored.log_odds = log_odds; }, largest_variance);
     }
   }
 }
@@ -86,13 +86,12 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          const std::vector<PlannedObservation>& scan,
                          std::span<const std::int64_t> assignment,
                          std::span<const LandmarkObservation> terms,
-                         std::span<const std::uint32_t> chosen_terms, memory::LandmarkTree& map,
-                         memory::SpatialIndex& index, MapUpdateScratch& scratch,
-                         MapUpdateCounts& counts) {
-  update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, index, scratch.touched);
+                         std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
+                         MapUpdateScratch& scratch, MapUpdateCounts& counts) {
+  update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, scratch.touched);
   const ExistenceConfig& ex = in.existence;
   if (ex.negative_information && in.max_range > ex.range_margin) {
-    apply_negative_information(in, pose, map, index, scratch, counts);
+    apply_negative_information(in, pose, map, scratch, counts);
   }
   const auto step_now = static_cast<std::int64_t>(in.scan_step);
   for (std::size_t j = 0; j < scan.size(); ++j) {
@@ -102,28 +101,22 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
     stored.log_odds = ex.initial;
     stored.id = in.scan_step * kObservationsPerScanLimit + j;
     stored.last_seen = step_now;
-    const memory::Slot slot = map.insert(stored);
-    index.insert(slot, stored.x, stored.y, largest_variance(stored));
+    map.insert(stored, largest_variance(stored));
     ++counts.created;
   }
-}
-
-void index_map(const memory::LandmarkTree& map, memory::SpatialIndex& index) {
-  for (const auto [slot, lm] : map) index.insert(slot, lm.x, lm.y, largest_variance(lm));
 }
 
 template void update_particle_map<false>(const MapUpdateInput&, const Pose&,
                                          const std::vector<PlannedObservation>&,
                                          std::span<const std::int64_t>,
                                          std::span<const LandmarkObservation>,
-                                         std::span<const std::uint32_t>, memory::LandmarkTree&,
-                                         memory::SpatialIndex&, MapUpdateScratch&,
-                                         MapUpdateCounts&);
+                                         std::span<const std::uint32_t>, memory::ParticleMap&,
+                                         MapUpdateScratch&, MapUpdateCounts&);
 template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
                                         const std::vector<PlannedObservation>&,
                                         std::span<const std::int64_t>,
                                         std::span<const LandmarkObservation>,
-                                        std::span<const std::uint32_t>, memory::LandmarkTree&,
-                                        memory::SpatialIndex&, MapUpdateScratch&, MapUpdateCounts&);
+                                        std::span<const std::uint32_t>, memory::ParticleMap&,
+                                        MapUpdateScratch&, MapUpdateCounts&);
 
 }  // namespace fastslam::engine::internal

@@ -3,10 +3,9 @@
 // move with their means; every landmark in the sensor's footprint that was not chosen loses
 // existence log-odds and is removed below the bound (negative information, eq. 73-75); then the
 // new landmarks enter the map and the index, with ids (scan step) * 2^20 + (observation index).
-// This is the one place where the unknown-id pass changes a particle's tree and its spatial index,
-// and keeps them in step (an index entry is its landmark's slot, mean and largest covariance
-// eigenvalue, `largest_variance`).
-// Thread safety: writes only the particle's map and index; concurrent calls on distinct
+// The particle's memory::ParticleMap keeps its tree and spatial index in step; an index entry's
+// extent is its landmark's largest covariance eigenvalue, `largest_variance`.
+// Thread safety: writes only the particle's map; concurrent calls on distinct
 // particles with distinct scratch are safe. Costs: O((Z + k) log N) for Z observations and k
 // landmarks in view, plus O(k log k) to order them; no allocation once the scratch has grown,
 // beyond the maps' path copies.
@@ -24,6 +23,7 @@
 #include "engine/measurement_model.h"
 #include "engine/pose.h"
 #include "memory/landmark_tree.h"
+#include "memory/particle_map.h"
 #include "memory/spatial_index.h"
 
 namespace fastslam::engine::internal {
@@ -62,26 +62,22 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          const std::vector<PlannedObservation>& scan,
                          std::span<const std::int64_t> assignment,
                          std::span<const LandmarkObservation> terms,
-                         std::span<const std::uint32_t> chosen_terms, memory::LandmarkTree& map,
-                         memory::SpatialIndex& index, MapUpdateScratch& scratch,
-                         MapUpdateCounts& counts);
+                         std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
+                         MapUpdateScratch& scratch, MapUpdateCounts& counts);
 
 extern template void update_particle_map<false>(const MapUpdateInput&, const Pose&,
                                                 const std::vector<PlannedObservation>&,
                                                 std::span<const std::int64_t>,
                                                 std::span<const LandmarkObservation>,
                                                 std::span<const std::uint32_t>,
-                                                memory::LandmarkTree&, memory::SpatialIndex&,
-                                                MapUpdateScratch&, MapUpdateCounts&);
+                                                memory::ParticleMap&, MapUpdateScratch&,
+                                                MapUpdateCounts&);
 extern template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
                                                const std::vector<PlannedObservation>&,
                                                std::span<const std::int64_t>,
                                                std::span<const LandmarkObservation>,
                                                std::span<const std::uint32_t>,
-                                               memory::LandmarkTree&, memory::SpatialIndex&,
-                                               MapUpdateScratch&, MapUpdateCounts&);
-
-// A landmark tree's spatial index, built entry by entry in slot order.
-void index_map(const memory::LandmarkTree& map, memory::SpatialIndex& index);
+                                               memory::ParticleMap&, MapUpdateScratch&,
+                                               MapUpdateCounts&);
 
 }  // namespace fastslam::engine::internal

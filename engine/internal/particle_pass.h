@@ -176,7 +176,7 @@ class ParticlePass final : public Pass {
       associate_seconds += seconds_between(mark, chosen);
       const Pose pose(s_.store.x()[i], s_.store.y()[i], s_.store.theta()[i]);
       update_particle_map<kFs2>(in.map, pose, scan, scratch.assignment, scratch.search.terms,
-                                scratch.chosen_terms, s_.store.map(i), s_.store.index(i),
+                                scratch.chosen_terms, s_.store.map(i),
                                 scratch.map, counts);
       mark = Clock::now();
     }
@@ -194,8 +194,9 @@ class ParticlePass final : public Pass {
     PoseGaussian<N> prior;
     for (int k = 0; k < N; ++k) prior.mean[k] = col[k][i];
     if constexpr (kFs2) prior.cov = s_.covariances.template at<N>(i);
-    const memory::LandmarkTree& map = s_.store.map(i);
-    find_candidates<N, kFs2, kMl>(in.search, prior, map, s_.store.index(i), scan, scratch.search);
+    const memory::LandmarkTree& map = s_.store.map(i).tree();
+    find_candidates<N, kFs2, kMl>(in.search, prior, map, s_.store.map(i).index(), scan,
+                                  scratch.search);
     scratch.assignment.resize(scan.size());
     const std::span<std::int64_t> chosen(scratch.assignment);
     const double log_p0 = s_.config.log_new_landmark;

@@ -12,9 +12,7 @@ ResampleStage::ResampleStage(const FilterConfig& config, const parallel::Particl
     : kernel_(kernel),
       // Resampling costs nanoseconds per particle: its own grain (the kernel's default), so
       // that small filters resample inline. The result does not depend on it.
-      resampler_(config.resample, kernel, parallel::KernelConfig{}.grain),
-      follow_covariances_(config.algorithm == Algorithm::kFastSlam2 &&
-                          without_odometry(config.motion.kind)) {}
+      resampler_(config.resample, kernel, parallel::KernelConfig{}.grain) {}
 
 void ResampleStage::run(FilterState& state, std::uint64_t scan_step, bool heavy) {
   using Clock = std::chrono::steady_clock;
@@ -30,9 +28,6 @@ void ResampleStage::run(FilterState& state, std::uint64_t scan_step, bool heavy)
         resampler_.resample(state.store, state.config.seed, scan_step, grain);
     counters.resamples += outcome.resampled ? 1 : 0;
     counters.log_evidence += outcome.before.log_sum;
-    if (outcome.resampled && follow_covariances_) {
-      state.covariances.follow(resampler_.last_ancestors());
-    }
   } catch (const std::invalid_argument& e) {
     // Not std::invalid_argument, whose contract is "unchanged": the scan has been applied.
     throw std::runtime_error(std::string("Filter::observe: numerical failure after scan ") +

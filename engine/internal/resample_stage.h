@@ -28,7 +28,6 @@ class ResampleStage {
  private:
   const parallel::ParticleKernel& kernel_;
   parallel::Resampler resampler_;
-  bool follow_covariances_;  // FastSLAM 2.0 without odometry
 };
 
 }  // namespace fastslam::engine::internal

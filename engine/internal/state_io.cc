@@ -196,7 +196,11 @@ void save_state(const FilterState& s, const std::vector<TrajectoryPoint>& trajec
   std::sort(known.begin(), known.end(),
             [](const KnownSlot& a, const KnownSlot& b) { return a.id < b.id; });
   put_vector(out, known);
-  put_vector(out, s.covariances.values());
+  // M x 25 doubles, zeros when the store keeps none (FastSLAM 1.0).
+  const std::span<const double> kept = s.covariances.values();
+  std::vector<double> covariances(kept.begin(), kept.end());
+  covariances.resize(s.store.size() * PoseCovariances::kSlot, 0.0);
+  put_vector(out, covariances);
   const memory::ParticleStore& store = s.store;
   for (std::span<const double> column :
        {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
@@ -247,7 +251,8 @@ void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
   s.counters = h.counters;
   s.pending = std::move(h.pending);
   s.known_slots = std::move(h.known);
-  s.covariances.values() = std::move(h.covariances);
+  const std::span<double> kept = s.covariances.values();
+  std::copy_n(h.covariances.begin(), kept.size(), kept.begin());
   s.landmark_variance_bound = h.variance_bound;
   memory::ParticleStore& store = s.store;
   get_columns(in, store);
@@ -257,11 +262,11 @@ void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
     if (flag > 1 || (flag == 1 && i == 0)) corrupt("map sharing");
     if (flag == 1) {
       store.map(i) = store.map(i - 1);
-      store.index(i) = store.index(i - 1);
       continue;
     }
-    get_map(in, known_ids, h.known_entries, store.map(i));
-    if (!known_ids) index_map(store.map(i), store.index(i));
+    memory::LandmarkTree map(s.heap);
+    get_map(in, known_ids, h.known_entries, map);
+    store.map(i) = memory::ParticleMap(std::move(map), store.options().indexing, largest_variance);
   }
 }
 

@@ -1,17 +1,7 @@
-// exp(x) for x <= 0, from IEEE-754 +, *, and explicit fma only. Not API.
-//
-// Why not std::exp: the weights' exponentials are the hot loop of resampling and statistics
-// (one per particle per step). glibc's exp is an opaque call (about 5 ns here) that does not
-// vectorise, and its bits may differ between C library versions and CPU dispatch paths. This
-// one vectorises (about 1 ns per value with AVX2), gives the same bits on every machine with
-// IEEE-754 doubles and a correct std::fma, and, because every multiply-add is written as an
-// explicit fma, the same bits in every caller whatever the compiler's -ffp-contract choices.
-//
-// Method: Cody-Waite reduction x = n ln2 + r, |r| <= ln2 / 2, then the Taylor polynomial of
-// degree 13 for e^r by Horner (truncation error below 5e-18 relative), then scaling by 2^n
-// built in the exponent bits. Accuracy: within 2 ulp of e^x for x in [-708, 0] (tested against
-// long double). Inputs below -708 (and -inf) give exactly 0: relative weights under ~3e-308 are
-// zero (never subnormal, so the scaling stays exact).
+// exp(x) for x <= 0, from IEEE-754 +, * and explicit fma only (not API): it vectorises and
+// gives the same bits on every machine and C library, whatever -ffp-contract does. Cody-Waite
+// reduction, a degree-13 Taylor polynomial, scaling in the exponent bits. Within 2 ulp of e^x
+// on [-708, 0]; below -708 (and -inf) exactly 0. Why not std::exp: docs/parallel.md.
 // Thread safety: a pure function. Costs: O(1), no allocation, no branches.
 #pragma once
 

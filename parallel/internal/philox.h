@@ -1,25 +1,10 @@
-// Philox4x32-10, the counter-based generator behind parallel/random_stream.h. Not API.
-//
-// Salmon, Moraes, Dror, Shaw, "Parallel random numbers: as easy as 1, 2, 3", SC'11; the
-// reference implementation is Random123 (philox.h there). A block is a pure function of a 128-bit
-// counter and a 64-bit key: ten rounds of two 32x32->64 multiplies, xors with the other two
-// counter words and the round key, and a Weyl-sequence key bump between rounds.
-//
-// Four forms, bit-identical by construction (random_stream_test checks them against Random123's
-// known-answer vectors and each other):
-//   - `philox4x32_10`: one block, constexpr, for the scalar stream.
-//   - `philox4x32_10_lanes<L>`: L independent blocks sharing the key and counter words 2 and 3,
-//     written as plain loops over lanes so that g++/clang -O3 vectorise them (each 32-bit word
-//     sits in a 64-bit lane, which maps the 32x32->64 multiply onto vector multiplies).
-//   - `philox4x32_10_words`: one block on four 64-bit words with precomputed round keys, inline,
-//     for the body of a caller's own loop over blocks (the loop vectorises with whatever the
-//     caller does to the output, e.g. Box-Muller, and the words never leave registers).
-//   - `philox4x32_10_simd<L>`: L blocks in place with explicit 32x32->64 multiplies (vpmuludq),
-//     AVX-512 (`philox_rounds_avx512`, two 8-lane vectors side by side) or AVX2 (see there);
-//     `philox4x32_10_lanes` and the batch normals of random_stream.cc use it when available.
-// Thread safety: pure functions. Costs: no allocation; with AVX-512 about 2.1 ns per block at 16
-// lanes including the conversion to two uniforms and the stores (fill_uniform: 950 M uniforms/s,
-// against 860 M/s for the auto-vectorised vpmullq loops; see random_stream_benchmark).
+// Philox4x32-10 (Salmon, Moraes, Dror, Shaw, SC'11; Random123's philox.h), the counter-based
+// generator behind parallel/random_stream.h (not API): a block is a pure function of a 128-bit
+// counter and a 64-bit key. Four forms, bit-identical by construction (random_stream_test
+// checks Random123's known answers): philox4x32_10 (one block, constexpr),
+// philox4x32_10_lanes<L> (plain loops that vectorise), philox4x32_10_words (one block inline in
+// a caller's loop), philox4x32_10_simd<L> (explicit AVX-512 / AVX2 multiplies).
+// Thread safety: pure functions. Costs: O(1) per block, no allocation.
 #pragma once
 
 #include <array>
@@ -81,9 +66,7 @@ constexpr PhiloxRoundKeys philox_round_keys(PhiloxKey key) noexcept {
 // AVX-512 does not mask the words between rounds: a product's high half is garbage above the
 // low 32 bits of x1 and x3, which only ever meet xors (into the low halves of x0 and x2, whose
 // high halves then carry garbage too) and vpmuludq, which ignores high halves; the stores mask
-// once. It runs two 8-lane vectors side by side (two independent dependency chains). On the
-// webmap FS1 filter (M = 100, one thread) the AVX-512 forms here and in random_stream.cc's
-// pair_run took the loop from 22.2 to 20.7 ms of CPU (filter_benchmark, medians).
+// once. It runs two 8-lane vectors side by side (two independent dependency chains).
 // kPhiloxSimdLanes is the vector width in lanes, 0 where unused.
 #if defined(__AVX512F__)
 inline constexpr std::size_t kPhiloxSimdLanes = 8;

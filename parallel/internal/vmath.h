@@ -1,33 +1,17 @@
-// Vectorisable elementary functions (log, sin, cos, atan2) for the batch kernels of
-// parallel/random_stream.cc, engine/motion_batch.h and engine/landmark_batch.cc. Not API.
-//
-// Why not libm: glibc's scalar and vector (libmvec) functions need not agree bit for bit, and a
-// call per element stops a loop over particles from vectorising at all. These are plain inline
-// functions of IEEE-754 +, -, *, / and fma, so a loop over lanes that calls them vectorises
-// (g++ -O3, SSE2 to AVX-512), and the scalar and the vector forms give the same bits: every
-// multiply-add is an explicit `madd` (one fma where the target has a fast fma, FP_FAST_FMA,
-// else a * b + c, which the compiler then cannot contract either), and no other product feeds
-// an addition, so -ffp-contract has nothing left to fuse. Results do depend on whether the
-// build target has a fast fma (the last bit may differ between an FMA build and a generic
-// x86-64 one), never on the C library. (For a square root, use std::sqrt in a file compiled
-// with -fno-math-errno: correctly rounded, one instruction, vectorised.)
-//
-// Accuracy (measured against long-double libm; tests/parallel/internal/vmath_test.cc asserts
-// the bounds in brackets):
-//   log_positive(x)   positive normal x: below 0.75 ulp [1 ulp].
-//   sincos_turns(t)   cos and sin of 2 pi t 2^-53 for integer t in [0, 2^53): absolute error
-//                     below 1.4 * 2^-53 [1.5 * 2^-53]; exact quadrant (no reduction error).
-//   sincos(x)         cos and sin of x for |x| <= kSinCosMaxArg = 2^20: absolute error below
-//                     1.2 * 2^-53 for |x| <= 1000 and 1.45 * 2^-53 up to 2^20 [2^-52], including
-//                     arguments next to multiples of pi/2. Beyond 2^20 the results are finite
-//                     but meaningless: callers test `sincos_in_domain` and take a scalar libm
-//                     path for such arguments (engine/motion_batch.h does).
-//   sincos_small(x)   |x| <= kSinCosSmallArg: the bits of sincos(x) [tested], without the
-//                     range reduction.
-//   arctan2(y, x)     finite y and x (zeros, signed as std::atan2, and subnormals included):
-//                     below 1.6 ulp of the result (measured) [2 ulp].
-// Thread safety: pure functions. Costs: O(1), no allocation, no branches a vectoriser cannot
-// turn into selects; log divides once.
+// Vectorisable log, sin, cos and atan2 for the batch kernels (random_stream.cc,
+// engine/motion_batch.h, engine/landmark_batch.cc); not API. Plain inline IEEE-754 arithmetic
+// with every multiply-add an explicit `madd`, so loops over lanes vectorise and scalar and
+// vector forms give the same bits; results never depend on the C library (only on whether the
+// target has a fast fma). Error bounds (asserted by tests/parallel/internal/vmath_test.cc):
+//   log_positive(x)   positive normal x: 1 ulp.
+//   sincos_turns(t)   cos and sin of 2 pi t 2^-53, integer t in [0, 2^53): 1.5 * 2^-53
+//                     absolute, exact quadrant.
+//   sincos(x)         |x| <= kSinCosMaxArg = 2^20: 2^-52 absolute; beyond, finite but
+//                     meaningless (callers test sincos_in_domain and fall back to libm).
+//   sincos_small(x)   |x| <= kSinCosSmallArg: the bits of sincos(x), without range reduction.
+//   arctan2(y, x)     finite y, x (signed zeros as std::atan2): 2 ulp.
+// Why not libm, and the measured errors: docs/parallel.md.
+// Thread safety: pure functions. Costs: O(1), no allocation; log divides once.
 #pragma once
 
 #include <array>
@@ -48,7 +32,7 @@ namespace fastslam::parallel::internal {
 }
 #endif
 
-// Natural log of a positive normal double; error below 0.75 ulp (measured).
+// Natural log of a positive normal double; error within 1 ulp (tested).
 // Reduction from musl's log (x = 2^k m, m in [sqrt(2)/2, sqrt(2))); polynomial from fdlibm's
 // e_log.c (Sun Microsystems, 1993): log(m) = 2 atanh(s), s = f / (2 + f), f = m - 1.
 [[gnu::always_inline]] inline double log_positive(double x) noexcept {
@@ -142,7 +126,7 @@ inline constexpr std::array<double, 8> kCosPoly = taylor(0);
 }  // namespace vmath_detail
 
 // cos(2 pi t) and sin(2 pi t) for t = turns * 2^-53, turns an integer in [0, 2^53); absolute
-// error below 1.4 * 2^-53 (measured). The quadrant comes from rounding 4t, which is exact, so
+// error within 1.5 * 2^-53 (tested). The quadrant comes from rounding 4t, which is exact, so
 // there is no argument-reduction error.
 [[gnu::always_inline]] inline void sincos_turns(double turns, double& cos_out,
                                                 double& sin_out) noexcept {

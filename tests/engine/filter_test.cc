@@ -1182,7 +1182,7 @@ TEST_P(FilterAlgorithmTest, EstimateIsTheBruteForceWeightedMeanAndBestParticle) 
                                      : store.theta()[want.best];
       ASSERT_TRUE(same_bits(est.best_pose[k], column));
     }
-    const memory::LandmarkTree& map = store.map(want.best);
+    const memory::LandmarkTree& map = store.map(want.best).tree();
     ASSERT_EQ(est.map.size(), map.size());
     std::size_t j = 0;
     for (const auto [slot, lm] : map) {
@@ -1560,8 +1560,8 @@ TEST_P(FilterUnknownAssociationTest, SpatialIndexStaysExactAgainstBruteForce) {
     if (!event.is_scan || ++scans % 25 != 0) return;
     const memory::ParticleStore& store = f.particles();
     for (std::size_t i = 0; i < store.size(); ++i) {
-      const memory::LandmarkTree& map = store.map(i);
-      const memory::SpatialIndex& index = store.index(i);
+      const memory::LandmarkTree& map = store.map(i).tree();
+      const memory::SpatialIndex& index = store.map(i).index();
       std::vector<memory::SpatialEntry> truth, got;
       for (const auto [slot, lm] : map) {
         // The extent: the covariance's largest eigenvalue, rounded up to a float (the gate

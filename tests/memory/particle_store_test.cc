@@ -1,9 +1,11 @@
 // The structure-of-arrays particle store: construction, column alignment, and `gather`
 // (resampling) against a naive oracle - particle k of the result is a full copy of particle
-// index[k] (columns and a std::map per particle). The maps no survivor holds are freed exactly
-// (node counts computed from the slots), bad indices are refused with the store unchanged, and
-// gather runs inside a two-thread task_arena, between parallel per-particle edits, and in
-// several stores sharing maps at once. Labelled "concurrency" (ThreadSanitizer runs it too).
+// index[k] (columns, the covariance column when carried, and a std::map per particle, whose
+// spatial index, when the store keeps one, holds exactly the landmarks' means). The maps no
+// survivor holds are freed exactly (node counts computed from the slots), bad indices are refused
+// with the store unchanged, and gather runs inside a two-thread task_arena, between parallel
+// per-particle edits, and in several stores sharing maps at once. Labelled "concurrency"
+// (ThreadSanitizer runs it too).
 #include "memory/particle_store.h"
 
 #include <algorithm>
@@ -11,6 +13,7 @@
 #include <iterator>
 #include <random>
 #include <set>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -20,6 +23,7 @@
 
 #include "memory/landmark_tree.h"
 #include "memory/node_heap.h"
+#include "memory/particle_map.h"
 #include "tests/memory/heap_fixtures.h"
 
 namespace fastslam::memory {
@@ -40,6 +44,35 @@ struct NaiveParticle {
   double x = 0, y = 0, theta = 0, v = 0, omega = 0, log_weight = 0;
   Oracle map;
 };
+
+constexpr StoreOptions kIndexed{Indexing::kSpatial, PoseCovariance::kNone};
+
+float no_extent(const Landmark&) { return 0.0f; }
+
+// A particle map holding the landmarks of `tree` (shared), in the given mode.
+ParticleMap map_of(const LandmarkTree& tree, Indexing indexing) {
+  return ParticleMap(tree, indexing, no_extent);
+}
+
+// The index of an indexed map holds one entry per landmark, at its mean; an unindexed one none.
+::testing::AssertionResult index_in_step(const ParticleMap& map) {
+  if (!map.indexed()) {
+    return map.index().empty() ? ::testing::AssertionSuccess()
+                               : ::testing::AssertionFailure() << "unindexed map has entries";
+  }
+  if (map.index().size() != map.size()) {
+    return ::testing::AssertionFailure()
+           << "index size " << map.index().size() << ", map size " << map.size();
+  }
+  std::set<Slot> seen;
+  bool ok = true;
+  map.index().for_each([&](const SpatialEntry& e) {
+    const Landmark* l = map.find(e.slot);
+    ok = ok && l != nullptr && l->x == e.x && l->y == e.y && seen.insert(e.slot).second;
+  });
+  return ok ? ::testing::AssertionSuccess()
+            : ::testing::AssertionFailure() << "an entry is not at its landmark's mean";
+}
 
 template <class C>
 class ParticleStoreTest : public testing::HeapLeakCheck<C> {
@@ -69,8 +102,10 @@ class ParticleStoreTest : public testing::HeapLeakCheck<C> {
       if (store.landmark_count(k) != p.map.size()) {
         return ::testing::AssertionFailure() << "landmark count of particle " << k;
       }
-      auto same = same_contents(store.map(k), p.map);
+      auto same = same_contents(store.map(k).tree(), p.map);
       if (!same) return same << " (particle " << k << ")";
+      auto in_step = index_in_step(store.map(k));
+      if (!in_step) return in_step << " (particle " << k << ")";
     }
     return ::testing::AssertionSuccess();
   }
@@ -96,13 +131,14 @@ class ParticleStoreTest : public testing::HeapLeakCheck<C> {
       if (kind == 0 || p.map.size() < 4) {
         const Slot expected = lowest_free(p.map);
         const Landmark l = tagged_landmark(k, static_cast<Slot>(rng() & 0xfff));
-        EXPECT_EQ(store.map(k).insert(l), expected);
+        EXPECT_EQ(store.map(k).insert(l, 0.5f), expected);
         p.map[expected] = l;
       } else {
         auto it = p.map.begin();
         std::advance(it, static_cast<std::ptrdiff_t>(rng() % p.map.size()));
         if (kind == 1) {
-          store.map(k).edit(it->first).y += 1.0;
+          store.map(k).update(
+              it->first, [](Landmark& l) { l.y += 1.0; }, no_extent);
           it->second.y += 1.0;
         } else {
           store.map(k).erase(it->first);
@@ -156,12 +192,12 @@ TYPED_TEST(ParticleStoreTest, GatherCopiesEveryColumnAndSharesEveryMap) {
   for (std::size_t k = 0; k < kParticles; ++k) {
     this->set_columns(store, k, 0.5, naive[k]);
     for (Slot s = 0; s <= k * 3; ++s) {
-      store.map(k).insert(tagged_landmark(k, s));
+      store.map(k).insert(tagged_landmark(k, s), 0.0f);
       naive[k].map[s] = tagged_landmark(k, s);
     }
   }
   ASSERT_TRUE(this->matches(store, naive));
-  std::vector<LandmarkTree> old_maps;
+  std::vector<ParticleMap> old_maps;
   for (std::size_t k = 0; k < kParticles; ++k) old_maps.push_back(store.map(k));
   const std::vector<std::uint32_t> index = {3, 3, 0, 8, 2, 2, 2, 5, 7, 7, 1};
   const std::int64_t allocations = this->heap_.stats().allocations;
@@ -173,7 +209,7 @@ TYPED_TEST(ParticleStoreTest, GatherCopiesEveryColumnAndSharesEveryMap) {
     EXPECT_TRUE(store.map(k).shares_root_with(old_maps[index[k]])) << "particle " << k;
   }
   // Copies diverge on their own: editing particle 0 leaves particle 1 (same ancestor) alone.
-  store.map(0).edit(0).x = 1e9;
+  store.map(0).edit_unindexed(0).x = 1e9;
   naive[0].map[0].x = 1e9;
   EXPECT_TRUE(this->matches(store, naive));
 }
@@ -182,31 +218,33 @@ TYPED_TEST(ParticleStoreTest, GatherCopiesEveryColumnAndSharesEveryMap) {
 // the indices no survivor holds are freed.
 TYPED_TEST(ParticleStoreTest, GatherSharesEverySpatialIndex) {
   constexpr std::size_t kParticles = 6;
-  ParticleStore store(kParticles, this->heap_);
+  ParticleStore store(kParticles, this->heap_, kIndexed);
   std::vector<std::set<std::pair<Slot, double>>> naive(kParticles);
   for (std::size_t k = 0; k < kParticles; ++k) {
     for (Slot s = 0; s < 40 * (k + 1); ++s) {
       const double x = static_cast<double>(k * 1000 + s);
-      store.index(k).insert(s, x, -x);
+      EXPECT_EQ(store.map(k).insert(Landmark{.x = x, .y = -x}, 0.0f), s);
       naive[k].insert({s, x});
     }
   }
-  std::vector<SpatialIndex> old;
-  for (std::size_t k = 0; k < kParticles; ++k) old.push_back(store.index(k));
+  std::vector<ParticleMap> old;
+  for (std::size_t k = 0; k < kParticles; ++k) old.push_back(store.map(k));
   const std::vector<std::uint32_t> index = {4, 4, 1, 0};
   store.gather(index);
   old.clear();  // only the survivors' indices hold nodes now
   for (std::size_t k = 0; k < index.size(); ++k) {
     std::set<std::pair<Slot, double>> entries;
-    store.index(k).for_each([&](const SpatialEntry& e) {
+    EXPECT_TRUE(index_in_step(store.map(k)));
+    store.map(k).index().for_each([&](const SpatialEntry& e) {
       EXPECT_EQ(e.y, -e.x);
       entries.insert({e.slot, e.x});
     });
     EXPECT_EQ(entries, naive[index[k]]) << "particle " << k;
   }
-  EXPECT_TRUE(store.index(0).shares_root_with(store.index(1)));
-  store.index(0).erase(0, 4000.0, -4000.0);  // copies diverge on their own
-  EXPECT_EQ(store.index(0).size() + 1, store.index(1).size());
+  EXPECT_TRUE(store.map(0).shares_root_with(store.map(1)));
+  store.map(0).erase(0);  // copies diverge on their own
+  EXPECT_EQ(store.map(0).index().size() + 1, store.map(1).index().size());
+  EXPECT_TRUE(index_in_step(store.map(0)));
   store.gather({});
   EXPECT_EQ(this->heap_.stats().live_nodes, 0);
 }
@@ -216,7 +254,7 @@ TYPED_TEST(ParticleStoreTest, GatherResizesTheStore) {
   std::vector<NaiveParticle> naive(4);
   for (std::size_t k = 0; k < 4; ++k) {
     this->set_columns(store, k, 0.0, naive[k]);
-    store.map(k).insert(tagged_landmark(k, 0));
+    store.map(k).insert(tagged_landmark(k, 0), 0.0f);
     naive[k].map[0] = tagged_landmark(k, 0);
   }
   for (const std::vector<std::uint32_t>& index :
@@ -265,11 +303,11 @@ TYPED_TEST(ParticleStoreTest, GatherFreesExactlyTheNodesNoSurvivorHolds) {
   std::mt19937_64 rng(21);
   std::vector<std::vector<Slot>> touched(kParticles);
   for (std::size_t k = 0; k < kParticles; ++k) {
-    store.map(k) = base;
+    store.map(k) = map_of(base, Indexing::kNone);
     for (int u = 0; u < 10; ++u) {
       const Slot s = static_cast<Slot>(rng() % n);
       touched[k].push_back(s);
-      store.map(k).edit(s).x = -1.0;
+      store.map(k).edit_unindexed(s).x = -1.0;
     }
   }
   // While the base handle lives, every base node does; each survivor adds its copied paths.
@@ -318,7 +356,7 @@ TYPED_TEST(ParticleStoreTest, GatherRefusesAnOutOfRangeIndexAndChangesNothing) {
     this->set_columns(store, k, 0.25, naive[k]);
     this->mutate(store, k, naive[k], rng, 6);
   }
-  std::vector<LandmarkTree> maps;
+  std::vector<ParticleMap> maps;
   for (std::size_t k = 0; k < 5; ++k) maps.push_back(store.map(k));
   const std::int64_t allocations = this->heap_.stats().allocations;
   for (const auto& [index, message] :
@@ -339,13 +377,74 @@ TYPED_TEST(ParticleStoreTest, GatherRefusesAnOutOfRangeIndexAndChangesNothing) {
   EXPECT_EQ(this->heap_.stats().allocations, allocations);
 }
 
+// The covariance column: absent by default; carried, it moves with its particle (whatever the
+// grain); as scratch, gather leaves its entries in place and only follows the particle count.
+TYPED_TEST(ParticleStoreTest, PoseCovarianceColumnIsAbsentCarriedOrLeftInPlace) {
+  constexpr std::size_t kStride = ParticleStore::kPoseCovStride;
+  ParticleStore none(7, this->heap_);
+  EXPECT_TRUE(none.pose_cov().empty());
+  none.gather(std::vector<std::uint32_t>{1, 1, 2});
+  EXPECT_TRUE(none.pose_cov().empty());
+
+  auto fill = [](ParticleStore& store) {
+    const std::span<double> cov = store.pose_cov();
+    for (std::size_t i = 0; i < cov.size(); ++i) cov[i] = static_cast<double>(i) + 0.25;
+  };
+  std::mt19937_64 rng(13);
+  for (std::size_t grain : {0u, 1u, 7u, 1000u}) {
+    ParticleStore carried(40, this->heap_, {Indexing::kNone, PoseCovariance::kCarried});
+    ASSERT_EQ(carried.pose_cov().size(), 40 * kStride);
+    for (double c : carried.pose_cov()) ASSERT_EQ(c, 0.0);
+    fill(carried);
+    std::vector<double> before(carried.pose_cov().begin(), carried.pose_cov().end());
+    for (std::size_t to : {40u, 55u, 12u}) {
+      const auto index = this->random_index(rng, carried.size(), to);
+      carried.gather(index, grain);
+      ASSERT_EQ(carried.pose_cov().size(), to * kStride);
+      for (std::size_t k = 0; k < to; ++k) {
+        for (std::size_t e = 0; e < kStride; ++e) {
+          ASSERT_EQ(carried.pose_cov()[k * kStride + e], before[index[k] * kStride + e])
+              << "grain " << grain << ", particle " << k << ", entry " << e;
+        }
+      }
+      before.assign(carried.pose_cov().begin(), carried.pose_cov().end());
+    }
+  }
+
+  ParticleStore scratch(10, this->heap_, {Indexing::kNone, PoseCovariance::kScratch});
+  fill(scratch);
+  const std::vector<double> before(scratch.pose_cov().begin(), scratch.pose_cov().end());
+  scratch.gather(std::vector<std::uint32_t>{9, 9, 9, 0, 1, 2, 3, 4, 5, 6});
+  EXPECT_TRUE(std::equal(before.begin(), before.end(), scratch.pose_cov().begin(),
+                         scratch.pose_cov().end()));
+  scratch.gather(std::vector<std::uint32_t>{1, 2});
+  EXPECT_EQ(scratch.pose_cov().size(), 2 * kStride);
+}
+
+// A store's maps take its indexing, and empty_map() gives one of the same kind.
+TYPED_TEST(ParticleStoreTest, MapsTakeTheStoresIndexing) {
+  ParticleStore plain(3, this->heap_);
+  ParticleStore indexed(3, this->heap_, kIndexed);
+  for (std::size_t k = 0; k < 3; ++k) {
+    EXPECT_FALSE(plain.map(k).indexed());
+    EXPECT_TRUE(indexed.map(k).indexed());
+  }
+  EXPECT_EQ(plain.empty_map().indexing(), Indexing::kNone);
+  EXPECT_EQ(indexed.empty_map().indexing(), Indexing::kSpatial);
+  indexed.map(1).insert(Landmark{.x = 3.0, .y = 4.0}, 1.0f);
+  indexed.gather(std::vector<std::uint32_t>{1, 1, 0, 1});
+  EXPECT_EQ(indexed.map(3).index().size(), 1u);
+  EXPECT_TRUE(indexed.map(2).index().empty());
+  EXPECT_TRUE(index_in_step(indexed.map(0)));
+}
+
 // Many rounds of a filter's memory traffic: every particle's map edited in parallel (distinct
 // particles on distinct threads), then a gather inside a two-thread task_arena; the store
 // matches the naive particles after every round.
 TYPED_TEST(ParticleStoreTest, ParallelEditsAndGathersInATwoThreadArenaMatchTheOracle) {
   const std::size_t particles = sized<std::size_t>(256, 64);
   const int rounds = sized(40, 8);
-  ParticleStore store(particles, this->heap_);
+  ParticleStore store(particles, this->heap_, kIndexed);
   std::vector<NaiveParticle> naive(particles);
   tbb::task_arena arena(2);
   std::mt19937_64 rng(77);
@@ -379,10 +478,11 @@ TYPED_TEST(ParticleStoreTest, StoresSharingMapsGatherConcurrently) {
   stores.reserve(kStores);
   std::vector<std::vector<NaiveParticle>> naive(kStores);
   for (std::size_t i = 0; i < kStores; ++i) {
-    stores.emplace_back(particles, this->heap_);
+    stores.emplace_back(particles, this->heap_, kIndexed);
     naive[i].resize(particles);
+    const ParticleMap indexed_base = map_of(base, Indexing::kSpatial);
     for (std::size_t k = 0; k < particles; ++k) {
-      stores[i].map(k) = base;
+      stores[i].map(k) = indexed_base;
       naive[i][k].map = base_oracle;
     }
   }

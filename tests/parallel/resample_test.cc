@@ -729,7 +729,7 @@ void fill_store(memory::ParticleStore& store, const std::vector<double>& log_wei
     store.theta()[i] = 0.001 * static_cast<double>(i);
     store.log_weight()[i] = log_weight[i];
     for (int k = 0; k < landmarks; ++k) {
-      store.map(i).insert({.x = static_cast<double>(i), .id = static_cast<std::uint64_t>(k)});
+      store.map(i).insert({.x = static_cast<double>(i), .id = static_cast<std::uint64_t>(k)}, 0.0f);
     }
   }
 }
@@ -780,6 +780,42 @@ TEST(ResampleStore, GathersPosesSharesMapsAndFreesTheDead) {
   }
   EXPECT_EQ(x_after[0], x_after[1]);
   EXPECT_EQ(x_after[0], x_after[2]);
+}
+
+// A store that carries each particle's covariance (FastSLAM 2.0 without odometry): resample
+// moves it with its particle, whatever the thread count and grain; a store of indexed maps
+// shares each survivor's tree and index together.
+TEST(ResampleStore, CarriedCovarianceAndIndexedMapsFollowTheirParticle) {
+  const std::size_t m = 2000;
+  constexpr std::size_t kStride = memory::ParticleStore::kPoseCovStride;
+  const std::vector<double> l = make_log_weights(m, Shape::kPeaked, 9);
+  for (const auto& [threads, call_grain] :
+       {std::pair<unsigned, std::size_t>{1u, 0}, {2u, 0}, {2u, 5}}) {
+    memory::MallocHeap heap;
+    {
+      const ParticleKernel kernel({.threads = threads, .grain = 128});
+      memory::ParticleStore store(m, heap,
+                                  {memory::Indexing::kSpatial, memory::PoseCovariance::kCarried});
+      fill_store(store, l, 3);
+      for (std::size_t i = 0; i < store.pose_cov().size(); ++i) {
+        store.pose_cov()[i] = static_cast<double>(i);
+      }
+      Resampler resampler({}, kernel);
+      ASSERT_TRUE(resampler.resample(store, 99, 4, call_grain).resampled);
+      const auto ancestors = resampler.last_ancestors();
+      for (std::size_t k = 0; k < m; ++k) {
+        for (std::size_t e = 0; e < kStride; ++e) {
+          ASSERT_EQ(store.pose_cov()[k * kStride + e],
+                    static_cast<double>(ancestors[k] * kStride + e));
+        }
+        ASSERT_EQ(store.map(k).index().size(), 3u);
+        if (k > 0 && ancestors[k] == ancestors[k - 1]) {
+          ASSERT_TRUE(store.map(k).shares_root_with(store.map(k - 1)));
+        }
+      }
+    }
+    EXPECT_EQ(heap.stats().live_nodes, 0);
+  }
 }
 
 TEST(ResampleStore, PolicyBelowThresholdNormalisesInstead) {

@@ -29,7 +29,8 @@ struct World {
 
   // m particles near the origin sharing a map of `known` landmarks (slots 0..known-1), and a
   // scan observing slots 0..known-1 and then two new landmarks.
-  World(std::size_t m, std::size_t known, int n) : store(m, heap), cov(m) {
+  World(std::size_t m, std::size_t known, int n)
+      : store(m, heap, {memory::Indexing::kNone, memory::PoseCovariance::kScratch}), cov(store) {
     std::mt19937_64 rng(11);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
     in.sensor = &sensor;
@@ -49,7 +50,8 @@ struct World {
       store.v()[i] = 1 + 0.1 * u(rng);
       store.omega()[i] = 0.05 * u(rng);
       store.log_weight()[i] = -1.0 * static_cast<double>(i);
-      store.map(i) = map;
+      store.map(i) = memory::ParticleMap(map, memory::Indexing::kNone,
+                                         [](const memory::Landmark&) { return 0.0f; });
       if (n > 0) {
         Eigen::MatrixXd a(n, n);
         for (int e = 0; e < n * n; ++e) a.data()[e] = 0.1 * u(rng);

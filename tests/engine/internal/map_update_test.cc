@@ -37,8 +37,7 @@ TEST(MapUpdateTest, LargestVarianceIsTheEigenvalueRoundedUp) {
 
 struct World {
   memory::PoolHeap heap;
-  memory::LandmarkTree map{heap};
-  memory::SpatialIndex index{heap};
+  memory::ParticleMap map{heap, memory::Indexing::kSpatial};
   std::map<memory::Slot, memory::Landmark> oracle;
   RangeBearingModel sensor{SensorOffset{0.3, 0.0, 0.1}};
   MapUpdateInput in;
@@ -69,9 +68,7 @@ struct World {
                                1.0 + 0.8 * u(rng),
                                static_cast<std::uint64_t>(k),
                                4};
-      const memory::Slot slot = map.insert(l);
-      index.insert(slot, l.x, l.y, largest_variance(l));
-      oracle[slot] = l;
+      oracle[map.insert(l, largest_variance(l))] = l;
     }
     // Observations: every 7th landmark in view is observed (slightly off), plus three new ones.
     int seen = 0;
@@ -99,7 +96,8 @@ struct World {
   }
 };
 
-void expect_index_is_the_map(const memory::LandmarkTree& map, const memory::SpatialIndex& index) {
+void expect_index_is_the_map(const memory::ParticleMap& map) {
+  const memory::SpatialIndex& index = map.index();
   std::map<memory::Slot, memory::SpatialEntry> entries;
   index.within(0.0, 0.0, 1e6, [&](const memory::SpatialEntry& e) { entries[e.slot] = e; });
   ASSERT_EQ(entries.size(), map.size());
@@ -115,8 +113,7 @@ TEST(MapUpdateTest, MatchesTheOracle) {
   World w;
   MapUpdateScratch scratch;
   MapUpdateCounts counts;
-  update_particle_map<true>(w.in, w.pose, w.scan, w.assignment, {}, {}, w.map, w.index, scratch,
-                            counts);
+  update_particle_map<true>(w.in, w.pose, w.scan, w.assignment, {}, {}, w.map, scratch, counts);
   std::map<memory::Slot, memory::Landmark> want = w.oracle;
   std::uint64_t removed = 0;
   for (auto it = want.begin(); it != want.end();) {
@@ -163,7 +160,7 @@ TEST(MapUpdateTest, MatchesTheOracle) {
   }
   EXPECT_EQ(new_seen, 3u);
   EXPECT_EQ(w.map.size(), want.size() + 3);
-  expect_index_is_the_map(w.map, w.index);
+  expect_index_is_the_map(w.map);
 }
 
 TEST(MapUpdateTest, ReusedTermsGiveTheSameBits) {
@@ -180,9 +177,8 @@ TEST(MapUpdateTest, ReusedTermsGiveTheSameBits) {
   MapUpdateScratch scratch;
   MapUpdateCounts counts_a, counts_b;
   update_particle_map<false>(a.in, a.pose, a.scan, a.assignment, terms, chosen_terms, a.map,
-                             a.index, scratch, counts_a);
-  update_particle_map<true>(b.in, b.pose, b.scan, b.assignment, {}, {}, b.map, b.index, scratch,
-                            counts_b);
+                             scratch, counts_a);
+  update_particle_map<true>(b.in, b.pose, b.scan, b.assignment, {}, {}, b.map, scratch, counts_b);
   ASSERT_EQ(a.map.size(), b.map.size());
   for (const auto [slot, l] : a.map) {
     const memory::Landmark& other = b.map.at(slot);
@@ -192,11 +188,10 @@ TEST(MapUpdateTest, ReusedTermsGiveTheSameBits) {
   }
 }
 
-TEST(MapUpdateTest, IndexMapIndexesEverySlot) {
+TEST(MapUpdateTest, AMapRebuiltFromItsTreeIndexesEverySlot) {
   World w;
-  memory::SpatialIndex rebuilt(w.heap);
-  index_map(w.map, rebuilt);
-  expect_index_is_the_map(w.map, rebuilt);
+  const memory::ParticleMap rebuilt(w.map.tree(), memory::Indexing::kSpatial, largest_variance);
+  expect_index_is_the_map(rebuilt);
 }
 
 }  // namespace

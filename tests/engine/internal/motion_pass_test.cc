@@ -28,7 +28,7 @@ struct Fixture {
   std::vector<PendingControl> pending;
 
   Fixture(std::size_t m, std::size_t controls, bool no_odometry, std::uint64_t rng_seed)
-      : store(m, heap), cov(m) {
+      : store(m, heap, {memory::Indexing::kNone, memory::PoseCovariance::kScratch}), cov(store) {
     std::mt19937_64 rng(rng_seed);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
     for (std::size_t i = 0; i < m; ++i) {
