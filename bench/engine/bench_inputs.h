@@ -7,7 +7,6 @@
 #include <cmath>
 #include <cstddef>
 #include <random>
-#include <type_traits>
 
 #include <Eigen/Core>
 
@@ -19,15 +18,14 @@
 namespace fastslam::engine::bench {
 
 // The motion model a benchmark runs: the model's default, and for the Ackermann car the
-// Victoria Park car's geometry (../shared/data/victoria_park/README.md).
+// Victoria Park car's geometry (../shared/data/victoria_park/README.md). Built in place, so the
+// compiler sees the parameters as it does for a default-constructed model.
 template <class Model>
-Model bench_motion_model() {
-  if constexpr (std::is_same_v<Model, AckermannModel>) {
-    return AckermannModel(AckermannGeometry{3.78, 0.50, 2.83, 0.76});
-  } else {
-    return Model();
-  }
-}
+struct BenchMotion : Model {};
+template <>
+struct BenchMotion<AckermannModel> : AckermannModel {
+  BenchMotion() : AckermannModel(AckermannGeometry{3.78, 0.50, 2.83, 0.76}) {}
+};
 
 struct Scenario {
   Pose pose;

@@ -10,7 +10,8 @@ namespace {
 
 template <class Model>
 void BM_MotionSample(benchmark::State& state) {
-  const Model model = bench_motion_model<Model>();
+  const BenchMotion<Model> motion;
+  const Model& model = motion;
   const auto scenarios = make_scenarios(RangeBearingModel());
   const Eigen::Vector2d u(3.0, 0.1);
   const Eigen::Vector2d sigmas(0.3, 0.05);
@@ -27,7 +28,8 @@ BENCHMARK(BM_MotionSample<AckermannModel>);
 
 template <class Model>
 void BM_MotionPrior(benchmark::State& state) {
-  const Model model = bench_motion_model<Model>();
+  const BenchMotion<Model> motion;
+  const Model& model = motion;
   const auto scenarios = make_scenarios(RangeBearingModel());
   const Eigen::Vector2d u(3.0, 0.1);
   const Eigen::Matrix2d m = Model::control_covariance({0.3, 0.05});
