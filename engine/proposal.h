@@ -12,25 +12,8 @@
 // their Gaussian given it), and every landmark is then updated at the DRAWN pose with the
 // FastSLAM 1.0 update (eq. 53-55, engine/landmark_ekf.h).
 //
-// Where things are evaluated (the choice, made explicit):
-//  * Linearisation: each fold linearises g at the CURRENT proposal mean mu_s (for the first
-//    observation of a scan that is s_hat, exactly eq. 36-39). Re-linearising at the refined mean
-//    is what Bailey's fastslam2 does and is more accurate than keeping s_hat for every
-//    observation once the first one has moved the mean.
-//  * Form: eq. 48-49 are computed in the equivalent Kalman form (matrix inversion lemma):
-//      L = G_s Sigma_s G_s^T + Q,  K = Sigma_s G_s^T L^-1,  mu_s' = mu_s + K v,
-//      Sigma_s' = (I - K G_s) Sigma_s (I - K G_s)^T + K Q K^T   (Joseph form, stays PSD)
-//    because P is singular whenever the control has fewer dimensions than the pose (rank 2 for
-//    all our car models), so eq. 48's P^-1 does not exist; only 2x2 matrices are inverted.
-//  * Weight: the term of one observation is ln N(v; 0, L) with L = G_s Sigma_s G_s^T + Q at the
-//    current proposal. For the first fold of a scan (mu_s = s_hat, Sigma_s = P) that is exactly
-//    eq. 60-61 (`log_weight`, z_hat and Jacobians at s_hat). Summing the terms over the folds of a
-//    scan gives, by the chain rule, the joint likelihood p(z_1..z_k | s_{t-1}, u, map) under the
-//    linearisation, which is the principled extension of eq. 61 to several observations.
-//  * Data association (table 2): `evaluate_proposal` computes every term for a candidate landmark
-//    without changing anything; its log_likelihood (the pose integrated out) scores the
-//    candidate, and table 2's alternative (draw a pose from the folded proposal, then score with
-//    Q) is built from the same pieces. `fold` then folds the chosen one.
+// Where it linearises, why the Kalman form and how the terms of several observations combine
+// into one weight: docs/engine.md ("The FastSLAM 2.0 proposal").
 //
 // State dimension N: the pose is (x, y, theta) (N = 3); (x, y, theta, v, omega or kappa) for
 // the no-odometry models (N = 5, the extra columns of G_s are zero; the velocities are not drawn

@@ -51,11 +51,8 @@ struct VictoriaParkOptions {
   VictoriaParkGate gate;
   engine::AckermannGeometry geometry = kVictoriaParkGeometry;
   // Noises written into the header (the filter's defaults for this source; flags override).
-  // Chosen by a sweep on this data (FS1, M = 100, ML; session 2): GPS RMSE 11.4 m with table 1's
-  // negative information, 6.7 m without it. The published RFS-SLAM variances the README quotes
-  // (speed 0.2 (m/s)^2, steering 0.025 rad^2, range 0.025 m^2, bearing 2.5e-5 rad^2), used as
-  // they are, gave 125 m: the tree positions scatter far more than 0.16 m and 0.3 deg (trunk
-  // centre from a segment's ends), so the filter made new trees instead of closing loops.
+  // Chosen by a sweep on this data, against the published variances: docs/victoria-park.md
+  // ("The filter's noises").
   double sigma_speed = 0.5;     // m/s, per 25 ms odometry sample
   double sigma_steer = 0.05;    // rad
   double sigma_range = 1.0;     // m
