@@ -7,7 +7,8 @@
 namespace fastslam::engine::internal {
 
 void TrajectoryRecorder::begin(std::span<const double> log_weight, std::size_t controls) {
-  recorded_.assign(controls * log_weight.size() * 4, 0.0);
+  // Every entry is written by the motion pass (record_poses): no need to clear it.
+  recorded_.resize(controls * log_weight.size() * 4);
   const double max_lw = *std::max_element(log_weight.begin(), log_weight.end());
   weights_.resize(log_weight.size());
   for (std::size_t i = 0; i < log_weight.size(); ++i) {
