@@ -1,33 +1,16 @@
 // A FastSLAM runner for linear-Gaussian SLAM (paper section 7 and appendix B, the models of
-// engine/lg_slam.h): the filter of the convergence theorem, "FastSLAM 2.0 with M = 1 converges
-// in expectation to the correct map if one landmark's position is known", and of its relative
-// form (no known landmark: the map is correct up to a common offset).
-//
-// Known data association: every observation names its landmark, and all particles map the same
-// landmarks. One step (`step`), for each particle:
-//   1. the motion prior N(s + u, P) (eq. 78);
-//   2. FastSLAM 2.0: fold every observation of an already mapped landmark into it (eq. 48-49,
-//      engine/proposal.h; the known landmark folds with Sigma = 0) and add each fold's
-//      ln N(v; 0, L) to the log-weight (eq. 61). FastSLAM 1.0 (`LgSlamProposal::kMotion`, kept
-//      as the counter-example the theorem does not cover): the motion prior is the proposal and
-//      the weight is the product of the landmark EKFs' likelihoods at the drawn pose (eq. 31);
-//   3. draw the pose from the proposal with the two normals of the keyed stream
-//      (seed, step, particle, Purpose::kProposal);
-//   4. at the drawn pose: update every mapped landmark it observed with the landmark EKF
-//      (eq. 25, engine/landmark_ekf.h), initialise the newly seen ones (eq. 69-70: mean z + s,
-//      covariance R); the known landmark is never changed.
-// With M > 1 the particles are then resampled systematically (parallel/resample.h, streams
-// (seed, step)) every step; with M = 1 nothing is resampled (the theorem's case).
-// Linear models make every linearisation exact, so each piece is the exact Gaussian algebra.
-//
-// This is a reference runner for the theorem's experiment, not the scalable engine
-// (engine/filter.h): maps are flat vectors copied at resampling, O(M K) per step.
+// engine/lg_slam.h): the filter of the convergence theorem ("FastSLAM 2.0 with M = 1 converges
+// in expectation to the correct map if one landmark's position is known") and its relative form.
+// Known data association; each step draws every particle's pose from the motion prior folded
+// with the observations (FastSLAM 2.0) or from the prior alone (1.0, the counter-example), then
+// updates and initialises landmarks at the drawn pose; with M > 1 it resamples every step. A
+// reference runner, not the scalable engine: maps are flat vectors copied at resampling. The
+// step in full: docs/experiments.md ("The LG-SLAM runner, step by step").
 //
 // Ownership: the filter owns its particles; `step` borrows its observations for the call.
-// Thread safety: thread-compatible; one thread. Results are a pure function of the config, the
-// seed and the inputs. Costs: `step` is O(M (n + K)) for n observations and K landmarks (the
-// resampling copy), a few dozen flops per observation; it allocates O(K) scratch per step and
-// O(M K) when resampling.
+// Thread safety: thread-compatible; one thread; results are a pure function of the config, the
+// seed and the inputs. Costs: `step` is O(M (n + K)) for n observations and K landmarks, and
+// allocates O(K) scratch per step and O(M K) when resampling.
 #pragma once
 
 #include <cstddef>
