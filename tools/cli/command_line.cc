@@ -60,6 +60,10 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--loops", w.loops,
                  "times the route is driven (default: 2 for CSV worlds, 1 else)")
       ->check(CLI::Range(1, 1000));
+  cmd.add_option("--at-waypoint", o.sim.at_waypoint,
+                 "metres within which the simulated car has reached a waypoint")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
 }
 
 // The source's recommended filter settings, for each option the user did not give.
@@ -71,12 +75,14 @@ void apply_filter_defaults(const FilterDefaults& d, const Given& given, RunOptio
   if (d.existence_missed && !given("--existence-missed")) {
     o.filter.existence.missed = *d.existence_missed;
   }
+  if (d.match_radius && !given("--match-radius")) o.match_radius = *d.match_radius;
+  if (d.rpe_delta && !given("--rpe-delta")) o.rpe_delta = *d.rpe_delta;
   if (o.filter.algorithm == Algorithm::kFastSlam2) {
     if (d.fastslam2_sigma_range && !given("--sigma-range")) {
-      o.noise.sigma_range = d.fastslam2_sigma_range;
+      o.model.sigma_range = d.fastslam2_sigma_range;
     }
     if (d.fastslam2_sigma_bearing && !given("--sigma-bearing")) {
-      o.noise.sigma_bearing = d.fastslam2_sigma_bearing;
+      o.model.sigma_bearing = d.fastslam2_sigma_bearing;
     }
   }
 }
@@ -157,10 +163,13 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(CLI::Range(1U, 100'000'000U))
       ->capture_default_str();
-  cmd.add_option("--association", w.association,
+  cmd.add_option("--association", o.association,
                  "data association: known (ids from the source), ml (maximum likelihood, "
-                 "eq. 64) or das (sampling, eq. 65)")
-      ->check(CLI::IsMember(engine::enum_names<Association>()))
+                 "eq. 64), das (sampling, eq. 65), mixed (the ids given, detections without "
+                 "one discarded) or auto (the source's choice, else known when every detection "
+                 "has an id and ml otherwise)")
+      ->check(CLI::IsMember(std::vector<std::string>(std::begin(kAssociationModes),
+                                                     std::end(kAssociationModes))))
       ->capture_default_str();
   add_association_options(cmd, o);
   add_execution_options(cmd, o, w);
@@ -178,6 +187,14 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "filter noise of the second control component (steering rad, omega, the omega "
                  "increment; default: the source's)")
       ->check(CLI::NonNegativeNumber);
+  cmd.add_option("--max-range", w.max_range,
+                 "the filter's sensor range, m: beyond it no landmark is expected to be seen "
+                 "(default: the source's)")
+      ->check(CLI::PositiveNumber);
+  cmd.add_option("--field-of-view-deg", w.field_of_view_deg,
+                 "the filter's sensor field of view, degrees centred ahead (default: the "
+                 "source's)")
+      ->check(CLI::Range(0.001, 360.0));
   cmd.add_option("--initial-heading-deg", w.initial_heading_deg,
                  "start heading, degrees (default: the source's; victoria-park fits it to GPS)");
   add_victoria_park_options(cmd, o, w);
@@ -242,7 +259,6 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   const bool csv = !o.landmarks_csv.empty();
   o.sim.loops = w.loops > 0 ? w.loops : (csv ? 2 : 1);
   o.filter.algorithm = engine::parse_enum<Algorithm>(w.algorithm);
-  o.filter.association = engine::parse_enum<Association>(w.association);
   o.filter.resample.when = engine::parse_enum<ResamplePolicy::When>(w.resample);
   o.filter.resample.scheme = engine::parse_enum<ResampleScheme>(w.scheme);
   auto given = [&](const char* name) {
@@ -251,10 +267,14 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   };
   if (given("--spacing")) o.spacing = w.spacing;
   if (given("--scan-period")) o.scan_period = w.scan_period;
-  if (given("--sigma-range")) o.noise.sigma_range = w.sigma_range;
-  if (given("--sigma-bearing")) o.noise.sigma_bearing = w.sigma_bearing;
-  if (given("--sigma-u0")) o.noise.sigma_control0 = w.sigma_control0;
-  if (given("--sigma-u1")) o.noise.sigma_control1 = w.sigma_control1;
+  if (given("--sigma-range")) o.model.sigma_range = w.sigma_range;
+  if (given("--sigma-bearing")) o.model.sigma_bearing = w.sigma_bearing;
+  if (given("--sigma-u0")) o.model.sigma_control0 = w.sigma_control0;
+  if (given("--sigma-u1")) o.model.sigma_control1 = w.sigma_control1;
+  if (given("--max-range")) o.model.max_range = w.max_range;
+  if (given("--field-of-view-deg")) o.model.field_of_view = w.field_of_view_deg * std::numbers::pi / 180;
+  if (given("--max-steps")) o.max_steps = w.max_steps;
+  if (given("--max-seconds")) o.max_seconds = w.max_seconds;
   for (const SourceEntry& source : sources()) {
     if (source.name == o.source) apply_filter_defaults(source.defaults, given, o);
   }
@@ -309,7 +329,12 @@ void add_association_options(CLI::App& cmd, RunOptions& o) {
   cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
                "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
   cmd.add_option("--match-radius", o.match_radius,
-                 "metres within which estimated and true landmarks are paired (ml, das)")
+                 "metres within which estimated and true landmarks are paired (precision, "
+                 "recall, the landmark RMSE of ml and das) and GOSPA's cutoff")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--rpe-delta", o.rpe_delta,
+                 "metres of true path between the poses of a relative pose error pair")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
 }
@@ -349,6 +374,12 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--trace", o.trace,
                  "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
                  "landmark RMSE of the seen landmarks, landmarks in the map)");
+  cmd.add_option("--max-steps", w.max_steps,
+                 "stop after this many controls and report what the run has (default: none)")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 62));
+  cmd.add_option("--max-seconds", w.max_seconds,
+                 "stop after this much wall time and report what the run has (default: none)")
+      ->check(CLI::PositiveNumber);
   cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
       ->capture_default_str();

@@ -12,6 +12,7 @@
 // Thread safety: thread-compatible. Costs: negligible.
 #pragma once
 
+#include <cstdint>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -27,10 +28,12 @@ struct RunWords {
   double spacing = 0, scan_period = 0;  // given or not: RunOptions' optionals
   // Names from the engine's tables (engine/filter_config.h): the defaults of FilterConfig.
   std::string algorithm{engine::enum_name(engine::FilterConfig{}.algorithm)};
-  std::string association{engine::enum_name(engine::FilterConfig{}.association)};
   std::string resample{engine::enum_name(engine::FilterConfig{}.resample.when)};
   std::string scheme{engine::enum_name(engine::FilterConfig{}.resample.scheme)};
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
+  double max_range = 0, field_of_view_deg = 0;
+  std::uint64_t max_steps = 0;
+  double max_seconds = 0;
   double initial_heading_deg = 0;
   double vp_min_bearing_deg = 0, vp_max_bearing_deg = 0;  // given or not: the gate's defaults
   double vp_laser_yaw_deg = 0;

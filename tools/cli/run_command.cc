@@ -12,12 +12,10 @@
 #include <optional>
 #include <span>
 #include <stdexcept>
-#include <sys/resource.h>
 #include <unordered_map>
 #include <vector>
 
 #include <nlohmann/json.hpp>
-#include <oneapi/tbb/info.h>
 
 #include "engine/angles.h"
 #include "engine/ekf_slam.h"
@@ -25,7 +23,10 @@
 #include "engine/filter.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
+#include "tools/cli/run_recorder.h"
+#include "tools/cli/run_report.h"
 #include "tools/eval/map_evaluation.h"
+#include "tools/eval/map_metrics.h"
 #include "tools/eval/trajectory_errors.h"
 #include "tools/io/log_format.h"
 #include "tools/io/tum.h"
@@ -40,12 +41,6 @@ double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
-std::int64_t peak_rss_bytes() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<std::int64_t>(usage.ru_maxrss) * 1024;
-}
-
 // The true landmarks a run observed (by the ids its detections carry) and a kd-tree over them
 // for scoring maps whose ids mean nothing.
 class TruthTracker {
@@ -53,7 +48,7 @@ class TruthTracker {
   explicit TruthTracker(std::span<const TruthLandmark> landmarks)
       : landmarks_(landmarks),
         observed_flags_(new bool[landmarks.size()]()),
-        points_(positions(landmarks)),
+        points_(truth_positions(landmarks)),
         index_(points_) {
     for (std::size_t i = 0; i < landmarks.size(); ++i) slot_[landmarks[i].id] = i;
   }
@@ -76,9 +71,23 @@ class TruthTracker {
   double rmse(std::span<const engine::MapLandmark> map, bool known, double match_radius) const {
     return known ? landmark_rmse_by_id(map, landmarks_) : score(map, match_radius).rmse_m;
   }
+  // Everything run_report.h reports of the map.
+  MapScores scores(std::span<const engine::MapLandmark> map, bool known,
+                   double match_radius) const {
+    MapScores s;
+    s.paired = score(map, match_radius);
+    s.rmse = known ? landmark_rmse_by_id(map, landmarks_) : s.paired.rmse_m;
+    s.observed = observed_count();
+    const std::vector<Point> estimated = positions(map);
+    s.gospa = gospa(estimated, points_, index_, observed(), {.cutoff = match_radius, .order = 2});
+    const Detection d = precision_recall(estimated, points_, index_, observed(), match_radius);
+    s.precision = d.precision;
+    s.recall = d.recall;
+    return s;
+  }
 
  private:
-  static std::vector<Point> positions(std::span<const TruthLandmark> landmarks) {
+  static std::vector<Point> truth_positions(std::span<const TruthLandmark> landmarks) {
     std::vector<Point> out(landmarks.size());
     for (std::size_t i = 0; i < landmarks.size(); ++i) out[i] = {landmarks[i].x, landmarks[i].y};
     return out;
@@ -91,24 +100,13 @@ class TruthTracker {
   TruthIndex index_;
 };
 
-// What one run recorded, whichever the filter.
-struct RunRecord {
-  std::vector<double> control_times;
-  std::vector<StampedPose> truth;
-  std::vector<StampedPose> gps;
-  engine::Estimate estimate;
-  std::vector<engine::TrajectoryPoint> points;
-  engine::FilterStatistics stats;
-  double source_seconds = 0.0;
-  double filter_seconds = 0.0;  // the trace's estimates excluded
-};
-
 // What the loop reads from and reports to besides the filter.
 struct RunLoop {
   const RunOptions& options;
+  const AssociationChoice& association;
   Source& source;
   TruthTracker& truth;
-  bool known;
+  RunRecorder& recorder;
   TraceWriter* trace;  // null: no trace
   ProgressBar& progress;
   ProgressState& state;
@@ -127,63 +125,110 @@ void observe_state(F& filter, ProgressState& state) {
 }
 
 template <class F>
-void trace_row(F& filter, const RunLoop& loop, const RunRecord& r, double time) {
+void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth, double time) {
   const engine::Estimate now = filter.estimate();
   std::optional<double> pose_error;
-  if (!r.truth.empty() && time - r.truth.back().time <= kMaxInterpolationGap) {
-    pose_error =
-        std::hypot(now.mean_pose[0] - r.truth.back().x, now.mean_pose[1] - r.truth.back().y);
+  if (truth && time - truth->time <= kMaxInterpolationGap) {
+    pose_error = std::hypot(now.mean_pose[0] - truth->x, now.mean_pose[1] - truth->y);
   }
   std::optional<double> map_error;
   if (!loop.source.info().landmarks.empty()) {
-    map_error = loop.truth.rmse(now.map, loop.known, loop.options.match_radius);
+    map_error = loop.truth.rmse(now.map, loop.association.engine == engine::Association::kKnown,
+                                loop.options.match_radius);
   }
   loop.trace->row(time, pose_error, map_error, now.map.size(), loop.truth.observed_count());
 }
 
+// The scan as the filter takes it: under mixed association without its unlabelled detections
+// (counted); under known association a detection without an id is an error naming the source's
+// record and time, and the options that accept it.
+void prepare_scan(const RunLoop& loop, std::uint64_t event, double time,
+                  std::vector<engine::Observation>& scan, RunResult& r) {
+  if (loop.association.discard_unlabelled) {
+    const auto unlabelled = std::remove_if(scan.begin(), scan.end(),
+                                           [](const engine::Observation& z) { return z.id < 0; });
+    r.unlabelled_discarded += static_cast<std::uint64_t>(scan.end() - unlabelled);
+    scan.erase(unlabelled, scan.end());
+    return;
+  }
+  if (loop.association.engine != engine::Association::kKnown) return;
+  for (std::size_t j = 0; j < scan.size(); ++j) {
+    if (scan[j].id >= 0) continue;
+    char when[64];
+    std::snprintf(when, sizeof(when), " (scan at t = %.3f s)", time);
+    throw std::runtime_error(loop.source.where(event) + when + ": detection " +
+                             std::to_string(j) +
+                             " has no landmark id ('-'), which known association needs. Run with "
+                             "--association auto or ml to associate every detection, or mixed "
+                             "to use the ids given and discard the rest");
+  }
+}
+
 // One loop over the events of any source, the same for the FastSLAM `Filter` and the `EkfSlam`
-// baseline (same methods).
+// baseline (same methods). Errors the filter raises for an event are rethrown naming the
+// source's record and time.
 template <class F>
-void drive(F& filter, RunLoop& loop, RunRecord& r) {
+void drive(F& filter, RunLoop& loop, RunResult& r) {
   Event event;
   std::vector<engine::Observation> scan;
-  for (;;) {
+  const Clock::time_point start = Clock::now();
+  std::optional<StampedPose> last_truth;
+  for (std::uint64_t index = 0;; ++index) {
     const auto t0 = Clock::now();
+    if (loop.options.max_seconds &&
+        std::chrono::duration<double>(t0 - start).count() >= *loop.options.max_seconds) {
+      r.ended_by = "--max-seconds";
+      break;
+    }
     if (!loop.source.next(event, scan)) break;
     const auto t1 = Clock::now();
     double trace_seconds = 0.0;
-    switch (event.kind) {
-      case EventKind::kControl:
-        filter.predict(event.control, event.dt);
-        r.control_times.push_back(event.time);
-        break;
-      case EventKind::kScan:
-        loop.truth.see(scan);
-        filter.observe(scan);
-        if (loop.trace != nullptr && loop.trace->due()) {
-          const auto t_trace = Clock::now();
-          trace_row(filter, loop, r, event.time);
-          trace_seconds = seconds_since(t_trace);
-        }
-        if (loop.progress.due()) {
-          observe_state(filter, loop.state);
-          loop.progress.draw(loop.state);
-        }
-        break;
-      case EventKind::kTruthPose:
-        r.truth.push_back({event.time, event.x, event.y, event.theta});
-        break;
-      case EventKind::kGps:
-        r.gps.push_back({event.time, event.x, event.y, 0.0});
-        break;
+    try {
+      switch (event.kind) {
+        case EventKind::kControl:
+          if (loop.options.max_steps && filter.statistics().controls >= *loop.options.max_steps) {
+            r.ended_by = "--max-steps";
+            break;
+          }
+          filter.predict(event.control, event.dt);
+          loop.recorder.control(event);
+          break;
+        case EventKind::kScan:
+          prepare_scan(loop, index, event.time, scan, r);
+          loop.truth.see(scan);
+          filter.observe(scan);
+          loop.recorder.estimates(filter.take_trajectory());
+          if (loop.trace != nullptr && loop.trace->due()) {
+            const auto t_trace = Clock::now();
+            trace_row(filter, loop, last_truth, event.time);
+            trace_seconds = seconds_since(t_trace);
+          }
+          if (loop.progress.due()) {
+            observe_state(filter, loop.state);
+            loop.progress.draw(loop.state);
+          }
+          break;
+        case EventKind::kTruthPose:
+          loop.recorder.truth(event);
+          last_truth = StampedPose{event.time, event.x, event.y, event.theta};
+          break;
+        case EventKind::kGps:
+          loop.recorder.gps(event);
+          break;
+      }
+    } catch (const std::invalid_argument& e) {
+      char when[64];
+      std::snprintf(when, sizeof(when), " (t = %.3f s): ", event.time);
+      throw std::runtime_error(loop.source.where(index) + when + e.what());
     }
     r.source_seconds += std::chrono::duration<double>(t1 - t0).count();
     r.filter_seconds += seconds_since(t1);
     r.filter_seconds -= trace_seconds;
+    if (r.ended_by != "end of data") break;
   }
   const auto t_end = Clock::now();
   r.estimate = filter.estimate();
-  r.points = filter.take_trajectory();
+  loop.recorder.estimates(filter.take_trajectory());
   r.filter_seconds += seconds_since(t_end);
   r.stats = filter.statistics();
   if (loop.trace != nullptr) loop.trace->close();
@@ -191,133 +236,6 @@ void drive(F& filter, RunLoop& loop, RunRecord& r) {
     observe_state(filter, loop.state);
     loop.state.total = loop.state.done;  // the expected total was an estimate; the run is done
     loop.progress.finish(loop.state);
-  }
-}
-
-// The estimated trajectory at the source's reported point: the start, then the pose after
-// every control.
-std::vector<StampedPose> reported_trajectory(const RunRecord& r, const LogHeader& h,
-                                             const engine::SensorOffset& reported) {
-  std::vector<StampedPose> trajectory;
-  trajectory.reserve(r.points.size() + 1);
-  trajectory.push_back({h.start_time, h.start_pose[0], h.start_pose[1], h.start_pose[2]});
-  for (const engine::TrajectoryPoint& p : r.points) {
-    const double c = std::cos(p.theta), sn = std::sin(p.theta);
-    trajectory.push_back({r.control_times.at(p.control), p.x + reported.x * c - reported.y * sn,
-                          p.y + reported.x * sn + reported.y * c, p.theta});
-  }
-  return trajectory;
-}
-
-struct RunScores {
-  PositionErrors pose, fixes;
-  AlignedErrors aligned;
-  MapScore map;           // paired by distance (also counts spurious and missing landmarks)
-  double map_rmse = 0.0;  // known association: by id; else map.rmse_m
-  std::size_t observed = 0;
-};
-
-RunScores score_run(const RunRecord& r, std::span<const StampedPose> trajectory,
-                    const TruthTracker& truth, const SourceInfo& info, bool known,
-                    double match_radius) {
-  RunScores s;
-  s.pose = position_errors(trajectory, r.truth);
-  s.fixes = position_errors(trajectory, r.gps);
-  s.aligned = aligned_position_errors(trajectory, r.gps);
-  if (!info.landmarks.empty()) s.map = truth.score(r.estimate.map, match_radius);
-  s.map_rmse = known ? landmark_rmse_by_id(r.estimate.map, info.landmarks) : s.map.rmse_m;
-  s.observed = truth.observed_count();
-  return s;
-}
-
-constexpr double kDegrees = 180 / std::numbers::pi;
-
-nlohmann::json metrics_json(const RunOptions& options, const SourceInfo& info,
-                            const engine::FilterConfig& config, std::uint32_t particles,
-                            const RunRecord& r, const RunScores& s) {
-  const engine::FilterStatistics& st = r.stats;
-  nlohmann::json m = {
-      {"source", options.source},
-      {"world", info.name},
-      {"motion", engine::to_string(config.motion.kind)},
-      {"algorithm", engine::to_string(config.algorithm)},
-      {"particles", particles},
-      {"association", engine::to_string(config.association)},
-      {"seed", config.seed},
-      {"threads", config.threads > 0 ? config.threads : unsigned(tbb::info::default_concurrency())},
-      {"steps", st.controls},
-      {"scans", st.scans},
-      {"observations", st.observations},
-      {"true_landmarks", info.landmarks.size()},
-      {"landmarks", r.estimate.map.size()},
-      {"wall_seconds", r.filter_seconds},
-      {"source_seconds", r.source_seconds},
-      {"seconds_per_phase",
-       {{"predict", st.predict_seconds},
-        {"associate", st.associate_seconds},
-        {"update", st.update_seconds},
-        {"resample", st.resample_seconds}}},
-      {"resamples", st.resamples},
-      {"log_evidence", st.log_evidence},
-      {"live_tree_nodes", st.live_nodes},
-      {"live_tree_bytes", st.live_bytes},
-      {"peak_rss_bytes", peak_rss_bytes()},
-  };
-  if (info.simulated) m["simulator_seconds"] = r.source_seconds;
-  for (const auto& [key, value] : info.metrics) m[key] = value;
-  if (!r.truth.empty()) {
-    m["pose_rmse_m"] = s.pose.rmse;
-    m["final_position_error_m"] = std::hypot(r.estimate.mean_pose[0] - r.truth.back().x,
-                                             r.estimate.mean_pose[1] - r.truth.back().y);
-  }
-  if (!info.landmarks.empty()) {
-    m["landmark_rmse_m"] = s.map_rmse;
-    m["observed_landmarks"] = s.observed;
-    m["match_radius_m"] = options.match_radius;
-    m["matched_landmarks"] = s.map.matched;
-    m["spurious_landmarks"] = s.map.spurious;
-    m["missing_landmarks"] = s.map.missing;
-  }
-  if (config.association != engine::Association::kKnown) {
-    m["landmarks_created"] = st.landmarks_created;
-    m["landmarks_removed"] = st.landmarks_removed;
-  }
-  if (!r.gps.empty()) {
-    m["gps_rmse_m"] = s.fixes.rmse;
-    m["final_gps_error_m"] = s.fixes.last;
-    m["gps_fixes_used"] = s.fixes.used;
-    m["gps_fixes_skipped"] = s.fixes.skipped;
-    m["gps_rmse_aligned_m"] = s.aligned.rmse;
-    m["gps_alignment_rotation_deg"] = s.aligned.rotation * kDegrees;
-    m["initial_heading_deg"] = config.initial_pose[2] * kDegrees;
-  }
-  return m;
-}
-
-void print_summary(const RunOptions& options, const SourceInfo& info,
-                   const engine::FilterConfig& config, std::uint32_t particles, const RunRecord& r,
-                   const RunScores& s) {
-  std::printf("%s, M = %u, %s association, seed %llu: %llu steps, %llu scans, %zu landmarks\n",
-              std::string(engine::to_string(config.algorithm)).c_str(), particles,
-              std::string(engine::to_string(config.association)).c_str(),
-              static_cast<unsigned long long>(config.seed),
-              static_cast<unsigned long long>(r.stats.controls),
-              static_cast<unsigned long long>(r.stats.scans), r.estimate.map.size());
-  std::printf(" ");
-  if (!r.truth.empty()) std::printf(" pose RMSE %.3f m,", s.pose.rmse);
-  if (!info.landmarks.empty()) std::printf(" landmark RMSE %.3f m,", s.map_rmse);
-  if (!r.gps.empty()) {
-    std::printf(
-        " GPS RMSE %.3f m (%zu fixes, %zu skipped), at the end %.3f m, %.3f m after a "
-        "rigid alignment (rotation %.2f deg),",
-        s.fixes.rmse, s.fixes.used, s.fixes.skipped, s.fixes.last, s.aligned.rmse,
-        s.aligned.rotation * kDegrees);
-  }
-  std::printf(" filter %.3f s (%s %.3f s)\n", r.filter_seconds,
-              info.simulated ? "simulator" : "reading", r.source_seconds);
-  if (!info.landmarks.empty()) {
-    std::printf("  map: %zu matched within %.1f m, %zu spurious, %zu of %zu observed missing\n",
-                s.map.matched, options.match_radius, s.map.spurious, s.map.missing, s.observed);
   }
 }
 
@@ -345,7 +263,7 @@ SourceOptions source_options(const RunOptions& o) {
   SourceOptions s;
   s.data = o.data;
   s.seed = o.filter.seed;
-  s.clutter = o.filter.association != engine::Association::kKnown;
+  s.clutter = o.association != "known";
   s.sim.landmarks_csv = o.landmarks_csv;
   s.sim.waypoints_csv = o.waypoints_csv;
   s.sim.world = o.world;
@@ -389,7 +307,7 @@ engine::SensorOffset tracked_point_offset(const RunOptions& o, const LogHeader& 
 }
 
 // The filter's configuration: the options' algorithm, particles, ...; the models of the
-// source's header; the noise overrides.
+// source's header; the model overrides.
 engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
   engine::FilterConfig config = o.filter;
   config.record_trajectory = true;
@@ -403,10 +321,13 @@ engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
                                          : o.no_odometry_sigma[1];
   }
   config.sensor = h.sensor;
-  if (o.noise.sigma_range) config.sensor.sigma_range = *o.noise.sigma_range;
-  if (o.noise.sigma_bearing) config.sensor.sigma_bearing = *o.noise.sigma_bearing;
-  if (o.noise.sigma_control0) config.motion.sigma_control[0] = *o.noise.sigma_control0;
-  if (o.noise.sigma_control1) config.motion.sigma_control[1] = *o.noise.sigma_control1;
+  const ModelOverrides& m = o.model;
+  if (m.sigma_range) config.sensor.sigma_range = *m.sigma_range;
+  if (m.sigma_bearing) config.sensor.sigma_bearing = *m.sigma_bearing;
+  if (m.max_range) config.sensor.max_range = *m.max_range;
+  if (m.field_of_view) config.sensor.field_of_view = *m.field_of_view;
+  if (m.sigma_control0) config.motion.sigma_control[0] = *m.sigma_control0;
+  if (m.sigma_control1) config.motion.sigma_control[1] = *m.sigma_control1;
   for (int k = 0; k < 5; ++k) config.initial_pose[k] = k < 3 ? h.start_pose[k] : 0.0;
   if (o.initial_heading) config.initial_pose[2] = engine::wrap_angle(*o.initial_heading);
   const engine::SensorOffset axle = tracked_point_offset(o, h);
@@ -427,10 +348,37 @@ std::string default_plot_script() {
   return FASTSLAM_PLOT_RUN_SCRIPT;
 }
 
+AssociationChoice resolve_association(const std::string& mode, const SourceInfo& info,
+                                      const FilterDefaults& defaults) {
+  std::string chosen = mode;
+  if (mode == "auto") {
+    chosen = defaults.association ? std::string(*defaults.association)
+             : info.labels == Labels::kAll ? "known"
+                                           : "ml";
+  }
+  AssociationChoice c;
+  c.mode = chosen;
+  if (chosen == "mixed") {
+    c.engine = engine::Association::kKnown;
+    c.discard_unlabelled = true;
+  } else {
+    c.engine = engine::parse_enum<engine::Association>(chosen);  // throws naming the modes
+  }
+  return c;
+}
+
 int run_simulation(const RunOptions& options) {
-  const std::unique_ptr<Source> source = find_source(options.source).open(source_options(options));
+  RunResult r;
+  const auto t_open = Clock::now();
+  const SourceEntry& entry = find_source(options.source);
+  const std::unique_ptr<Source> source = entry.open(source_options(options));
+  r.open_seconds = seconds_since(t_open);
   const SourceInfo& info = source->info();
-  const engine::FilterConfig config = filter_config(options, info.header);
+  const AssociationChoice association =
+      resolve_association(options.association, info, entry.defaults);
+  RunOptions resolved = options;
+  resolved.filter.association = association.engine;
+  const engine::FilterConfig config = filter_config(resolved, info.header);
   const bool ekf = config.algorithm == engine::Algorithm::kEkf;
   const std::uint32_t particles = ekf ? 1 : config.particles;
   ProgressBar progress(options.progress);
@@ -442,9 +390,9 @@ int run_simulation(const RunOptions& options) {
   if (!options.trace.empty()) {
     trace = std::make_unique<TraceWriter>(options.trace, options.trace_every);
   }
-  const bool known = config.association == engine::Association::kKnown;
-  RunLoop loop{options, *source, truth, known, trace.get(), progress, state};
-  RunRecord r;
+  RunRecorder recorder(info.header, tracked_point_offset(options, info.header), options.out,
+                       options.rpe_delta);
+  RunLoop loop{options, association, *source, truth, recorder, trace.get(), progress, state};
   if (ekf) {
     engine::EkfSlam filter(config);
     drive(filter, loop, r);
@@ -452,18 +400,17 @@ int run_simulation(const RunOptions& options) {
     engine::Filter filter(config);
     drive(filter, loop, r);
   }
-
-  const std::vector<StampedPose> trajectory =
-      reported_trajectory(r, info.header, tracked_point_offset(options, info.header));
-  const RunScores scores = score_run(r, trajectory, truth, info, known, options.match_radius);
-  const nlohmann::json metrics = metrics_json(options, info, config, particles, r, scores);
-  print_summary(options, info, config, particles, r, scores);
+  r.trajectories = recorder.finish();
+  if (!info.landmarks.empty()) {
+    r.map = truth.scores(r.estimate.map, association.engine == engine::Association::kKnown,
+                         options.match_radius);
+  }
+  const RunSettings settings{options, info, config, association, particles};
+  const nlohmann::json metrics = metrics_json(settings, r);
+  print_summary(settings, r);
   if (options.out.empty()) return 0;
-  // The poses after the controls (the start is not a control's).
   write_run_files(options.out, {.metrics = &metrics,
-                                .trajectory = std::span(trajectory).subspan(1),
-                                .truth = r.truth,
-                                .gps = r.gps,
+                                .streamed = r.trajectories.files,
                                 .map = r.estimate.map,
                                 .true_landmarks = info.landmarks});
   if (!options.plot_script.empty()) draw_map(options.plot_script, options.out);

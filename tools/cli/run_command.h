@@ -5,8 +5,9 @@
 // which writes any source as a native log.
 //
 // Ownership: plain options in; files out. Thread safety: one run per call; the filter runs its
-// own threads. Costs: the source's plus the filter's; memory O(steps) for the trajectory and
-// the truth.
+// own threads. Costs: the source's plus the filter's; memory that of the map and the source,
+// not of the run's length: the trajectory, the truth and the trace are streamed to their files
+// and scored as they come (tools/cli/run_recorder.h).
 #pragma once
 
 #include <cstdint>
@@ -29,10 +30,27 @@ inline constexpr double kNoOdometrySigmaV = 0.15;      // m/s per step
 inline constexpr double kNoOdometrySigmaOmega = 0.05;  // rad/s per step
 inline constexpr double kNoOdometrySigmaKappa = 0.01;  // 1/m per step
 
-// Filter noises that replace the source's (a log header's, or the simulator's).
-struct NoiseOverrides {
+// Filter models that replace the source's (a log header's, or the simulator's): noises, and
+// the sensor's range (m) and field of view (rad, centred ahead).
+struct ModelOverrides {
   std::optional<double> sigma_range, sigma_bearing, sigma_control0, sigma_control1;
+  std::optional<double> max_range, field_of_view;
 };
+
+// --association: the engine's modes, "mixed" (labelled detections by their ids, unlabelled
+// ones discarded and counted) and "auto" (the source's recommendation, else known when every
+// detection carries an id, ml otherwise).
+inline constexpr const char* kAssociationModes[] = {"auto", "known", "ml", "das", "mixed"};
+
+// The association a run uses: the engine's, and whether unlabelled detections are dropped.
+struct AssociationChoice {
+  engine::Association engine = engine::Association::kKnown;
+  bool discard_unlabelled = false;
+  std::string mode;  // "known", "ml", "das" or "mixed"
+};
+// Resolves `mode` for a source. Throws std::invalid_argument for an unknown mode.
+AssociationChoice resolve_association(const std::string& mode, const SourceInfo& info,
+                                      const FilterDefaults& defaults);
 
 struct RunOptions {
   std::string source = "sim";  // a name in the registry (tools/datasets/source.h)
@@ -46,11 +64,18 @@ struct RunOptions {
   std::optional<double> scan_period;
   double loop_length = 2000.0;  // loop
   SimConfig sim;
-  engine::FilterConfig filter;
-  // Unknown association: estimated landmarks are paired with true ones within this distance
-  // (tools/eval/map_evaluation.h) for landmark_rmse_m and the spurious and missing counts.
+  engine::FilterConfig filter;  // its association is set from `association` once resolved
+  std::string association = "auto";  // one of kAssociationModes
+  // Estimated and true landmarks are paired within this distance (tools/eval/map_evaluation.h)
+  // for the unknown-association landmark RMSE, precision and recall; it is also GOSPA's cutoff.
   double match_radius = 5.0;
-  NoiseOverrides noise;
+  // Metres of true path between the two poses of a relative-pose-error pair.
+  double rpe_delta = 10.0;
+  ModelOverrides model;
+  // Budgets: the run stops after this many controls, or once this much wall time has passed
+  // (checked between events), and reports what it has, saying why it ended.
+  std::optional<std::uint64_t> max_steps;
+  std::optional<double> max_seconds;
   // "odometry": the source's motion model with its controls; "none": the controls are ignored
   // (only their dt is used) and the pose follows the Brownian velocity model of eq. 79-81
   // (engine::MotionKind::kBrownian), with `no_odometry_sigma` (the per-control increments of v,
@@ -86,12 +111,12 @@ struct RunOptions {
 // source tree's tools/scripts/plot_run.py.
 std::string default_plot_script();
 
-// The source's options: the world, the data, the seed; false alarms only under unknown
-// association.
+// The source's options: the world, the data, the seed; simulated false alarms unless the
+// association is "known".
 SourceOptions source_options(const RunOptions& options);
 
 // The filter's configuration for a source with header `h` under `options`: the header's
-// models and noises, the options' algorithm, particles, association, ... and noise overrides;
+// models and noises, the options' algorithm, particles, association, ... and model overrides;
 // without odometry the Brownian model, and on an Ackermann car the rear axle tracked with the
 // sensor at (a, b) from it plus the header's own sensor offset (`tracked_point_offset`).
 engine::FilterConfig filter_config(const RunOptions& options, const LogHeader& h);

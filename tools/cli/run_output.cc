@@ -14,30 +14,12 @@
 namespace fastslam::tools {
 namespace {
 
-void write_poses_csv(std::ofstream& file, std::span<const StampedPose> poses) {
-  file << "t,x,y,theta\n";
-  char line[160];
-  for (const StampedPose& p : poses) {
-    std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f,%.6f\n", p.time, p.x, p.y, p.theta);
-    file << line;
-  }
-}
-
 void write_map_csv(std::ofstream& file, std::span<const engine::MapLandmark> map) {
   file << "id,x,y,sxx,sxy,syy\n";
   char line[200];
   for (const engine::MapLandmark& l : map) {
     std::snprintf(line, sizeof(line), "%llu,%.6f,%.6f,%.9g,%.9g,%.9g\n",
                   static_cast<unsigned long long>(l.id), l.x, l.y, l.sxx, l.sxy, l.syy);
-    file << line;
-  }
-}
-
-void write_gps_csv(std::ofstream& file, std::span<const StampedPose> gps) {
-  file << "t,x,y\n";
-  char line[120];
-  for (const StampedPose& g : gps) {
-    std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f\n", g.time, g.x, g.y);
     file << line;
   }
 }
@@ -87,28 +69,12 @@ void write_run_files(const std::string& dir, const RunFiles& files) {
   };
   open("metrics.json") << files.metrics->dump(2) << '\n';
   {
-    std::ofstream file = open("trajectory.csv");
-    write_poses_csv(file, files.trajectory);
-  }
-  {
-    std::ofstream file = open("trajectory.tum");
-    write_tum(file, files.trajectory);
-  }
-  {
     std::ofstream file = open("landmarks.csv");
     write_map_csv(file, files.map);
   }
-  std::string written = "metrics.json,trajectory.csv,trajectory.tum,landmarks.csv";
-  if (!files.truth.empty()) {
-    std::ofstream file = open("truth.csv");
-    write_poses_csv(file, files.truth);
-    written += ",truth.csv";
-  }
-  if (!files.gps.empty()) {
-    std::ofstream file = open("gps.csv");
-    write_gps_csv(file, files.gps);
-    written += ",gps.csv";
-  }
+  std::string written = "metrics.json";
+  for (const std::string& name : files.streamed) written += "," + name;
+  written += ",landmarks.csv";
   if (!files.true_landmarks.empty()) {
     std::ofstream file = open("true_landmarks.csv");
     write_true_landmarks_csv(file, files.true_landmarks);

@@ -1,6 +1,7 @@
-// What `fastslam run` writes: the output directory's files (metrics.json, trajectory.csv and
-// .tum, landmarks.csv, and truth.csv, gps.csv, true_landmarks.csv when the source has them),
-// the `--trace` CSV of errors over time, and the map picture drawn by a plot script.
+// What `fastslam run` writes at its end: metrics.json, landmarks.csv and true_landmarks.csv
+// (when the source has them) in the output directory, beside the files streamed while it ran
+// (tools/cli/run_recorder.h); the `--trace` CSV of errors over time; and the map picture drawn
+// by a plot script.
 //
 // Ownership: borrows its inputs for the call; TraceWriter owns its file.
 // Thread safety: thread-compatible. Costs: O(rows written); draw_map waits for the script.
@@ -17,7 +18,6 @@
 
 #include "engine/filter.h"
 #include "tools/io/log_format.h"
-#include "tools/io/tum.h"
 
 namespace fastslam::tools {
 
@@ -41,17 +41,16 @@ class TraceWriter {
   std::uint64_t scans_ = 0;
 };
 
-// Everything a run leaves in its output directory.
+// What a run writes at its end.
 struct RunFiles {
   const nlohmann::json* metrics = nullptr;
-  std::span<const StampedPose> trajectory;  // the poses after the controls
-  std::span<const StampedPose> truth;
-  std::span<const StampedPose> gps;
+  std::span<const std::string> streamed;  // already in the directory, for the list
   std::span<const engine::MapLandmark> map;
   std::span<const TruthLandmark> true_landmarks;
 };
 
-// Creates `dir` and writes the files (those of empty spans left out); prints the list.
+// Creates `dir` and writes the files (true_landmarks.csv only when there are some); prints the
+// list of every file of the run.
 // Throws std::runtime_error naming a file that cannot be written.
 void write_run_files(const std::string& dir, const RunFiles& files);
 

@@ -10,6 +10,11 @@ LogSource::LogSource(Log log, std::string name, std::string summary) : log_(std:
   info_.header = log_.header;
   info_.landmarks = log_.landmarks;
   for (const Event& e : log_.events) info_.expected_controls += e.kind == EventKind::kControl;
+  std::size_t labelled = 0;
+  for (const engine::Observation& z : log_.observations) labelled += z.id >= 0;
+  info_.labels = labelled == log_.observations.size() ? Labels::kAll
+                 : labelled == 0                      ? Labels::kNone
+                                                      : Labels::kSome;
   info_.name = std::move(name);
   info_.summary = std::move(summary);
 }
@@ -22,6 +27,11 @@ bool LogSource::next(Event& e, std::vector<engine::Observation>& scan) {
     scan.assign(first, first + e.count);
   }
   return true;
+}
+
+std::string LogSource::where(std::uint64_t index) const {
+  if (index < log_.lines.size()) return info_.name + ":" + std::to_string(log_.lines[index]);
+  return Source::where(index);
 }
 
 std::unique_ptr<Source> open_log_source(const SourceOptions& o) {

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,8 @@ class LogSource final : public Source {
   // `name` is the info's name (the file or directory read); `summary` the line convert prints.
   LogSource(Log log, std::string name, std::string summary = {});
   bool next(Event& event, std::vector<engine::Observation>& scan) override;
+  // "FILE:LINE" when the log was read from a file.
+  std::string where(std::uint64_t index) const override;
 
  private:
   Log log_;

@@ -67,6 +67,7 @@ class SimSource final : public Source {
     info_.expected_controls = tools::expected_controls(*world_, o.config);
     info_.name = o.landmarks_csv.empty() ? o.world : o.landmarks_csv;
     info_.simulated = true;
+    info_.labels = clutter && o.config.clutter_rate > 0 ? Labels::kSome : Labels::kAll;
     info_.metrics = {{"clutter_rate", o.config.clutter_rate}, {"scan_period_s", config.dt_observe}};
   }
 

@@ -1,6 +1,7 @@
 #include "tools/datasets/source.h"
 
 #include <stdexcept>
+#include <string>
 
 namespace fastslam::tools {
 
@@ -10,6 +11,10 @@ std::unique_ptr<Source> open_sim_source(const SourceOptions& options);
 std::unique_ptr<Source> open_log_source(const SourceOptions& options);
 std::unique_ptr<Source> open_victoria_park_source(const SourceOptions& options);
 FilterDefaults victoria_park_filter_defaults();
+
+std::string Source::where(std::uint64_t index) const {
+  return info_.name + ", event " + std::to_string(index);
+}
 
 std::span<const SourceEntry> sources() {
   static const SourceEntry kSources[] = {

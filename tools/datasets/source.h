@@ -34,9 +34,17 @@ struct SourceOptions {
   VictoriaParkOptions victoria_park;
 };
 
-// Filter settings a data set recommends beyond its header's models; the command line applies
-// each one set here unless the user gave that option.
+// Settings a data set recommends beyond its header's models; the command line applies each one
+// set here unless the user gave that option.
 struct FilterDefaults {
+  // What --association auto means for this source ("known", "ml", "das" or "mixed"); unset:
+  // known when every detection carries an id, ml otherwise.
+  std::optional<std::string_view> association;
+  // Scoring: the radius pairing estimated and true landmarks (m) and the travelled distance
+  // of the relative pose error's pairs (m), about the landmark spacing and the scale of the
+  // run.
+  std::optional<double> match_radius;
+  std::optional<double> rpe_delta;
   std::optional<double> existence_range_margin;  // m
   std::optional<double> existence_missed;        // log-odds
   // FastSLAM 2.0 only: the sensor noises, replacing the header's.
@@ -44,8 +52,12 @@ struct FilterDefaults {
   std::optional<double> fastslam2_sigma_bearing;  // rad
 };
 
+// Which detections carry a landmark id.
+enum class Labels : std::uint8_t { kAll, kSome, kNone };
+
 // What a source knows before its first event.
 struct SourceInfo {
+  Labels labels = Labels::kAll;
   LogHeader header;
   std::vector<TruthLandmark> landmarks;  // empty when the source has no true map
   double expected_controls = 0.0;        // for the progress bar; 0: unknown
@@ -61,6 +73,9 @@ class Source {
   // The next event in time order, a scan's observations in `scan`; false at the end.
   virtual bool next(Event& event, std::vector<engine::Observation>& scan) = 0;
   const SourceInfo& info() const noexcept { return info_; }
+  // Where event `index` (from 0, in the order `next` gave them) came from, for messages:
+  // "NAME, event INDEX", or the file and line where the source knows them.
+  virtual std::string where(std::uint64_t index) const;
 
  protected:
   SourceInfo info_;

@@ -14,10 +14,12 @@ namespace fastslam::tools {
 
 FilterDefaults victoria_park_filter_defaults() {
   const VictoriaParkFilterDefaults vp;
-  return {.existence_range_margin = vp.existence_range_margin,
-          .existence_missed = vp.existence_missed,
-          .fastslam2_sigma_range = vp.fastslam2_sigma_range,
-          .fastslam2_sigma_bearing = vp.fastslam2_sigma_bearing};
+  FilterDefaults d;
+  d.existence_range_margin = vp.existence_range_margin;
+  d.existence_missed = vp.existence_missed;
+  d.fastslam2_sigma_range = vp.fastslam2_sigma_range;
+  d.fastslam2_sigma_bearing = vp.fastslam2_sigma_bearing;
+  return d;
 }
 
 std::unique_ptr<Source> open_victoria_park_source(const SourceOptions& o) {

@@ -104,6 +104,7 @@ class Parser {
       }
       last_time = e.time;
       log.events.push_back(e);
+      log.lines.push_back(line_);
     }
     if (in_.bad()) fail("read error");
     return log;

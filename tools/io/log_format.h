@@ -67,6 +67,9 @@ struct Log {
   std::vector<Event> events;                      // time order (non-decreasing)
   std::vector<engine::Observation> observations;  // of all scans; id -1 = no id
   std::vector<TruthLandmark> landmarks;           // ids unique
+  // The line of each event in the file it was read from; empty for a log built in memory.
+  // Not part of what the log holds (operator== ignores it).
+  std::vector<std::uint64_t> lines;
   friend bool operator==(const Log& a, const Log& b);
 };
 

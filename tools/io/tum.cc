@@ -15,29 +15,36 @@ void put(std::string& line, double v) {
   line.append(buf, r.ptr);
 }
 
+void check_finite(const StampedPose& p) {
+  if (!std::isfinite(p.time) || !std::isfinite(p.x) || !std::isfinite(p.y) ||
+      !std::isfinite(p.theta)) {
+    throw std::invalid_argument("write_tum: a pose at time " + std::to_string(p.time) +
+                                " is not finite");
+  }
+}
+
 }  // namespace
 
 std::array<double, 4> yaw_quaternion(double yaw) {
   return {0.0, 0.0, std::sin(0.5 * yaw), std::cos(0.5 * yaw)};
 }
 
-void write_tum(std::ostream& out, std::span<const StampedPose> poses) {
-  for (const StampedPose& p : poses) {
-    if (!std::isfinite(p.time) || !std::isfinite(p.x) || !std::isfinite(p.y) ||
-        !std::isfinite(p.theta)) {
-      throw std::invalid_argument("write_tum: a pose at time " + std::to_string(p.time) +
-                                  " is not finite");
-    }
+void append_tum(std::string& text, const StampedPose& p) {
+  check_finite(p);
+  const std::array<double, 4> q = yaw_quaternion(p.theta);
+  put(text, p.time);
+  for (double v : {p.x, p.y, 0.0, q[0], q[1], q[2], q[3]}) {
+    text += ' ';
+    put(text, v);
   }
-  std::string text = "# timestamp tx ty tz qx qy qz qw\n";
+  text += '\n';
+}
+
+void write_tum(std::ostream& out, std::span<const StampedPose> poses) {
+  for (const StampedPose& p : poses) check_finite(p);
+  std::string text(kTumHeader);
   for (const StampedPose& p : poses) {
-    const std::array<double, 4> q = yaw_quaternion(p.theta);
-    put(text, p.time);
-    for (double v : {p.x, p.y, 0.0, q[0], q[1], q[2], q[3]}) {
-      text += ' ';
-      put(text, v);
-    }
-    text += '\n';
+    append_tum(text, p);
     if (text.size() > (1 << 16)) {  // stream in chunks: a trajectory can have millions of poses
       out << text;
       text.clear();

@@ -9,6 +9,8 @@
 #include <array>
 #include <iosfwd>
 #include <span>
+#include <string>
+#include <string_view>
 
 namespace fastslam::tools {
 
@@ -20,8 +22,15 @@ struct StampedPose {
 // (qx, qy, qz, qw) of the rotation by `yaw` radians about +z: (0, 0, sin(yaw/2), cos(yaw/2)).
 std::array<double, 4> yaw_quaternion(double yaw);
 
-// One comment line naming the columns, then one line per pose. Throws std::invalid_argument on
-// a non-finite value (writing nothing).
+// The comment line naming the columns, which opens a file.
+inline constexpr std::string_view kTumHeader = "# timestamp tx ty tz qx qy qz qw\n";
+
+// Appends one pose's line to `text`. Throws std::invalid_argument on a non-finite value
+// (appending nothing).
+void append_tum(std::string& text, const StampedPose& pose);
+
+// kTumHeader, then one line per pose. Throws std::invalid_argument on a non-finite value
+// (writing nothing).
 void write_tum(std::ostream& out, std::span<const StampedPose> poses);
 
 }  // namespace fastslam::tools

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "parallel/random_stream.h"
@@ -41,7 +42,12 @@ Simulator::Simulator(const World& world, const SimConfig& config, std::uint64_t 
     throw std::invalid_argument("simulator: noise standard deviations must not be negative");
   }
   if (config.loops < 1) throw std::invalid_argument("simulator: loops must be at least 1");
+  if (!(config.at_waypoint > 0)) {
+    throw std::invalid_argument("simulator: the waypoint radius must be positive");
+  }
   car_ = engine::BaileyCarModel(config.wheelbase);
+  turning_radius_ = config.wheelbase / std::tan(std::max(config.max_steer, 1e-3));
+  aim();
   if (!(config.clutter_rate >= 0) || !(config.clutter_rate <= 1000)) {
     throw std::invalid_argument("simulator: clutter_rate must be in [0, 1000] per scan");
   }
@@ -64,6 +70,9 @@ bool Simulator::next(SimStep& step) {
     } else {
       target = &world_->waypoints[waypoint_];
     }
+    aim();
+  } else {
+    check_progress(d2);
   }
   if (steer_update) {
     double delta =
@@ -100,6 +109,35 @@ bool Simulator::next(SimStep& step) {
   }
   ++step_;
   return true;
+}
+
+void Simulator::aim() {
+  const Point& target = world_->waypoints[waypoint_];
+  const double distance = std::hypot(target.x - pose_.x, target.y - pose_.y);
+  // The slowest honest approach: drive the distance, turn a full circle at the tightest
+  // radius, swing the steering from one stop to the other.
+  const double swing = 2 * config_.max_steer / std::max(config_.steer_rate, 1e-9);
+  aimed_at_ = static_cast<double>(step_) * config_.dt;
+  patience_ = kWaypointPatience *
+              ((distance + 2 * std::numbers::pi * turning_radius_) / config_.speed + swing + config_.dt);
+  closest_ = distance;
+}
+
+void Simulator::check_progress(double d2) {
+  const double now = static_cast<double>(step_) * config_.dt;
+  closest_ = std::min(closest_, std::sqrt(d2));
+  if (now - aimed_at_ <= patience_) return;
+  const Point& target = world_->waypoints[waypoint_];
+  char message[512];
+  std::snprintf(message, sizeof(message),
+                "simulator: waypoint %zu of %zu, at (%.2f, %.2f), not reached after %.1f s of driving "
+                "(%.1f s allowed): the car came no nearer than %.2f m and must come within "
+                "%.2f m. Its tightest turning circle has a radius of %.2f m, so a waypoint that "
+                "near beside its path is circled, never reached. Move the waypoint, or widen "
+                "the radius with --at-waypoint",
+                waypoint_ + 1, world_->waypoints.size(), target.x, target.y, now - aimed_at_, patience_, closest_,
+                config_.at_waypoint, turning_radius_);
+  throw std::runtime_error(message);
 }
 
 void Simulator::observe(SimStep& step) {

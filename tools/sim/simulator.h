@@ -3,7 +3,8 @@
 // rate), drives the route a given number of loops, and every observation period sees the
 // landmarks within range in front of it. Controls and observations get Gaussian noise from the
 // keyed random streams, so a run is a pure function of (world, config, seed). Ground truth is
-// recorded with each step.
+// recorded with each step. A waypoint the car cannot reach (one inside its turning circle is
+// orbited forever) stops the run with an error instead of running without end.
 //
 // Ownership: a `Simulator` borrows the `World`, which must outlive it.
 // Thread safety: thread-compatible; distinct simulators are independent.
@@ -79,11 +80,19 @@ class Simulator {
   Simulator(const World& world, const SimConfig& config, std::uint64_t seed);
 
   // Advances one control step into `step` (its scan vector is reused). Returns false, leaving
-  // `step` untouched, once the route has been driven `loops` times.
+  // `step` untouched, once the route has been driven `loops` times. Throws std::runtime_error
+  // naming the waypoint when the current one has not been reached within
+  // kWaypointPatience x (its distance over the speed, plus a full turning circle and a full
+  // swing of the steering): the car is circling it or cannot get there.
   bool next(SimStep& step);
+
+  static constexpr double kWaypointPatience = 3.0;
 
  private:
   void observe(SimStep& step);
+  // Starts the clock for reaching the current waypoint.
+  void aim();
+  void check_progress(double d2);
 
   const World* world_;
   SimConfig config_;
@@ -93,6 +102,10 @@ class Simulator {
   TruePose pose_;
   double steer_ = 0.0;
   std::size_t waypoint_ = 0;  // current target
+  double aimed_at_ = 0.0;     // s, when it became the target
+  double patience_ = 0.0;     // s, the time allowed to reach it
+  double closest_ = 0.0;      // m, the nearest the car has come to it
+  double turning_radius_ = 0.0;  // m, at full steering
   int loops_left_;
   bool done_ = false;
   double since_scan_ = 0.0;

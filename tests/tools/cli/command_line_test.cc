@@ -55,9 +55,9 @@ TEST_F(CommandLine, ConfigSetsWhatFlagsSetAndFlagsWin) {
   EXPECT_EQ(o.filter.algorithm, engine::Algorithm::kFastSlam2);
   EXPECT_EQ(o.loop_length, 750.5);
   EXPECT_FALSE(o.progress);
-  ASSERT_TRUE(o.noise.sigma_range.has_value());
-  EXPECT_EQ(*o.noise.sigma_range, 0.25);
-  EXPECT_FALSE(o.noise.sigma_bearing.has_value());  // not given anywhere: the source's
+  ASSERT_TRUE(o.model.sigma_range.has_value());
+  EXPECT_EQ(*o.model.sigma_range, 0.25);
+  EXPECT_FALSE(o.model.sigma_bearing.has_value());  // not given anywhere: the source's
   EXPECT_EQ(o.filter.resample.when, parallel::ResamplePolicy::When::kEveryStep);
   EXPECT_EQ(o.source, "log");
   EXPECT_EQ(o.data, "x.log");
@@ -69,7 +69,7 @@ TEST_F(CommandLine, WithoutConfigTheDefaultsStand) {
   EXPECT_EQ(o.filter.particles, 100u);
   EXPECT_TRUE(o.progress);
   EXPECT_EQ(o.sim.loops, 1);
-  // The built-in stress run: a grid of 10^5 landmarks, FastSLAM 1.0, known ids, the grid's
+  // The built-in stress run: a grid of 10^5 landmarks, FastSLAM 1.0, auto association, the grid's
   // spacing and scan period (resolved by the run, tools/cli/run_command.h).
   EXPECT_EQ(o.source, "sim");
   EXPECT_EQ(o.world, "grid");
@@ -79,10 +79,10 @@ TEST_F(CommandLine, WithoutConfigTheDefaultsStand) {
   EXPECT_FALSE(o.scan_period.has_value());
   EXPECT_EQ(o.sim.dt_observe, SimConfig{}.dt_observe);  // Bailey's, for CSV worlds
   EXPECT_EQ(o.filter.algorithm, engine::Algorithm::kFastSlam1);
-  EXPECT_EQ(o.filter.association, engine::Association::kKnown);
-  EXPECT_FALSE(o.noise.sigma_range.has_value());
-  ASSERT_TRUE(o.noise.sigma_control1.has_value());
-  EXPECT_EQ(*o.noise.sigma_control1, 0.1);
+  EXPECT_EQ(o.association, "auto");  // known on the grid: every detection has its id
+  EXPECT_FALSE(o.model.sigma_range.has_value());
+  ASSERT_TRUE(o.model.sigma_control1.has_value());
+  EXPECT_EQ(*o.model.sigma_control1, 0.1);
 }
 
 TEST_F(CommandLine, SpacingAndScanPeriodAreSetOnlyWhenGiven) {
@@ -139,8 +139,8 @@ TEST_F(CommandLine, SimulatorNoiseAndTraceOptions) {
   EXPECT_EQ(o.sim.sigma_steer, 0.1);
   EXPECT_EQ(o.sim.sigma_range, 0.05);
   EXPECT_EQ(o.sim.sigma_bearing, 0.02);
-  EXPECT_FALSE(o.noise.sigma_range.has_value());
-  EXPECT_FALSE(o.noise.sigma_control0.has_value());
+  EXPECT_FALSE(o.model.sigma_range.has_value());
+  EXPECT_FALSE(o.model.sigma_control0.has_value());
   EXPECT_EQ(o.trace, "t.csv");
   EXPECT_EQ(o.trace_every, 4u);
   o = run("{}", "");
@@ -164,12 +164,12 @@ TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
   o = run(R"({"existence-range-margin": 2.5})", "--source victoria-park --existence-missed 1");
   EXPECT_EQ(o.filter.existence.range_margin, 2.5);
   EXPECT_EQ(o.filter.existence.missed, 1.0);
-  EXPECT_FALSE(o.noise.sigma_range.has_value());  // FastSLAM 1.0: the header's noises
+  EXPECT_FALSE(o.model.sigma_range.has_value());  // FastSLAM 1.0: the header's noises
   o = run("{}", "--source victoria-park --algorithm fastslam2 --sigma-range 0.7");
-  EXPECT_EQ(*o.noise.sigma_range, 0.7);
-  EXPECT_EQ(*o.noise.sigma_bearing, vp.fastslam2_sigma_bearing);
+  EXPECT_EQ(*o.model.sigma_range, 0.7);
+  EXPECT_EQ(*o.model.sigma_bearing, vp.fastslam2_sigma_bearing);
   o = run("{}", "--source sim --algorithm fastslam2");
-  EXPECT_FALSE(o.noise.sigma_bearing.has_value());
+  EXPECT_FALSE(o.model.sigma_bearing.has_value());
   EXPECT_EQ(o.filter.existence.range_margin, engine_defaults.range_margin);
   EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
 }

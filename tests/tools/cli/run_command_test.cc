@@ -76,7 +76,7 @@ TEST(RunCommand, MaximumLikelihoodWithClutterReportsTheMapScores) {
   o.sim.loops = 1;
   o.sim.clutter_rate = 1.0;
   o.filter.particles = 30;
-  o.filter.association = engine::Association::kMaximumLikelihood;
+  o.association = "ml";
   o.match_radius = 2.0;
   o.out = temp_path("run_ml");
   ASSERT_EQ(run_simulation(o), 0);
@@ -421,7 +421,7 @@ TEST(RunCommand, FilterConfigComposesTheAxleWithTheHeadersOffset) {
   EXPECT_EQ(c.motion.sigma_control[1], kNoOdometrySigmaKappa);
   EXPECT_EQ(c.sensor.offset.x, 3.78);
   EXPECT_NEAR(c.initial_pose[1], 20.0 - 3.78, 1e-12);
-  o.noise.sigma_control1 = 0.02;
+  o.model.sigma_control1 = 0.02;
   EXPECT_EQ(filter_config(o, h).motion.sigma_control[1], 0.02);
   o.motion = "sideways";
   EXPECT_THROW(filter_config(o, h), std::invalid_argument);
@@ -513,7 +513,7 @@ TEST(RunCommand, EkfWithMaximumLikelihoodOnASmallGrid) {
   o.progress = false;
   o.landmarks = 200;
   o.filter.algorithm = engine::Algorithm::kEkf;
-  o.filter.association = engine::Association::kMaximumLikelihood;
+  o.association = "ml";
   o.sim.loops = 1;
   o.out = temp_path("run_grid_ekf");
   ASSERT_EQ(run_simulation(o), 0);
@@ -566,7 +566,7 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     o.loop_length = 200.0;
     o.sim.loops = 1;
     o.filter.algorithm = c.algorithm;
-    o.filter.association = c.association;
+    o.association = std::string(engine::to_string(c.association));
     o.filter.particles = c.particles;
     o.out = temp_path("trace_plain");
     ASSERT_EQ(run_simulation(o), 0);
@@ -668,6 +668,191 @@ TEST(RunCommand, SimulatorNoiseScalesTheTruthAndTheFilter) {
   EXPECT_GT(noisy, 10 * exact);
   std::filesystem::remove_all(o.out);
   std::filesystem::remove_all(quiet.out);
+}
+
+// A small loop world driven once, quickly.
+RunOptions small_loop(const std::string& name) {
+  RunOptions o;
+  o.progress = false;
+  o.world = "loop";
+  o.loop_length = 300.0;
+  o.sim.loops = 1;
+  o.filter.particles = 10;
+  o.out = temp_path(name);
+  return o;
+}
+
+std::string error_of(const RunOptions& o) {
+  try {
+    run_simulation(o);
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// --association auto: known when every detection carries an id, ml when some do not.
+TEST(RunCommand, AutoAssociationFollowsTheLabels) {
+  RunOptions o = small_loop("auto_known");
+  ASSERT_EQ(o.association, "auto");
+  ASSERT_EQ(run_simulation(o), 0);
+  EXPECT_EQ(read_metrics(o.out)["association"], "known");
+  EXPECT_EQ(read_metrics(o.out)["association_requested"], "auto");
+  RunOptions cluttered = small_loop("auto_ml");
+  cluttered.sim.clutter_rate = 1.0;
+  ASSERT_EQ(run_simulation(cluttered), 0);
+  EXPECT_EQ(read_metrics(cluttered.out)["association"], "ml");
+  std::filesystem::remove_all(o.out);
+  std::filesystem::remove_all(cluttered.out);
+}
+
+// A log mixing labelled detections with unlabelled false alarms: known association refuses it
+// naming the file, line and time and the options that accept it; mixed association discards
+// exactly the unlabelled ones, so it runs as the simulator's own known-association run (which
+// drops the false alarms at the source), bit for bit; auto picks ml.
+TEST(RunCommand, MixedAssociationDiscardsUnlabelledDetections) {
+  RunOptions o = small_loop("mixed_direct");
+  o.sim.clutter_rate = 2.0;
+  const std::string log_path = temp_path("mixed") + ".log";
+  RunOptions convert = o;
+  convert.out = log_path;
+  ASSERT_EQ(convert_to_log(convert), 0);
+  const Log log = read_log(log_path);
+  std::uint64_t unlabelled = 0;
+  for (const engine::Observation& z : log.observations) unlabelled += z.id < 0;
+  ASSERT_GT(unlabelled, 50u);
+
+  RunOptions from_log = o;
+  from_log.source = "log";
+  from_log.data = log_path;
+  from_log.out = temp_path("mixed_log");
+  from_log.association = "known";
+  const std::string error = error_of(from_log);
+  EXPECT_NE(error.find(log_path + ":"), std::string::npos) << error;
+  EXPECT_NE(error.find("(scan at t = "), std::string::npos) << error;
+  EXPECT_NE(error.find("has no landmark id ('-')"), std::string::npos) << error;
+  EXPECT_NE(error.find("--association auto or ml"), std::string::npos) << error;
+
+  from_log.association = "mixed";
+  ASSERT_EQ(run_simulation(from_log), 0);
+  const nlohmann::json mixed = read_metrics(from_log.out);
+  EXPECT_EQ(mixed["association"], "mixed");
+  EXPECT_EQ(mixed["unlabelled_discarded"], unlabelled);
+  o.association = "known";
+  ASSERT_EQ(run_simulation(o), 0);
+  const nlohmann::json direct = read_metrics(o.out);
+  for (const char* key : {"steps", "scans", "observations", "landmarks", "pose_rmse_m"}) {
+    EXPECT_EQ(direct[key], mixed[key]) << key;
+  }
+  EXPECT_EQ(read_text(o.out + "/trajectory.csv"), read_text(from_log.out + "/trajectory.csv"));
+
+  from_log.association = "auto";
+  ASSERT_EQ(run_simulation(from_log), 0);
+  EXPECT_EQ(read_metrics(from_log.out)["association"], "ml");
+  std::filesystem::remove_all(o.out);
+  std::filesystem::remove_all(from_log.out);
+  std::filesystem::remove(log_path);
+}
+
+// A bad record the filter refuses is reported with the log's file and line.
+TEST(RunCommand, FilterErrorsNameTheRecord) {
+  Log log;
+  log.header.motion.kind = engine::MotionKind::kUnicycle;
+  Event control;
+  control.time = 0.1;
+  control.dt = 0.1;
+  control.control = {1, 0};
+  Event scan;
+  scan.kind = EventKind::kScan;
+  scan.time = 0.1;
+  scan.count = 2;
+  log.events = {control, scan};
+  log.observations = {{5.0, 0.1, 3}, {6.0, 0.2, 3}};  // one landmark twice in a scan
+  RunOptions o = log_run(log, "bad_record", 4);
+  o.association = "known";
+  const std::string error = error_of(o);
+  EXPECT_NE(error.find(o.data + ":"), std::string::npos) << error;
+  EXPECT_NE(error.find("(t = 0.100 s)"), std::string::npos) << error;
+  EXPECT_NE(error.find("appears twice"), std::string::npos) << error;
+  std::filesystem::remove(o.data);
+}
+
+TEST(RunCommand, BudgetsEndTheRunAndSaySo) {
+  RunOptions o = small_loop("max_steps");
+  o.max_steps = 250;
+  ASSERT_EQ(run_simulation(o), 0);
+  nlohmann::json m = read_metrics(o.out);
+  EXPECT_EQ(m["steps"], 250);
+  EXPECT_EQ(m["ended_by"], "--max-steps");
+  EXPECT_EQ(line_count(o.out + "/trajectory.csv"), 250u + 1);
+  RunOptions timed = small_loop("max_seconds");
+  timed.max_seconds = 1e-9;
+  ASSERT_EQ(run_simulation(timed), 0);
+  m = read_metrics(timed.out);
+  EXPECT_EQ(m["ended_by"], "--max-seconds");
+  EXPECT_EQ(m["steps"], 0);
+  RunOptions whole = small_loop("whole");
+  ASSERT_EQ(run_simulation(whole), 0);
+  EXPECT_EQ(read_metrics(whole.out)["ended_by"], "end of data");
+  for (const RunOptions* r : {&o, &timed, &whole}) std::filesystem::remove_all(r->out);
+}
+
+// Dead reckoning beside the filter: with no control noise it is the truth; with the default
+// noise the filter beats it by far on a loop with known ids.
+TEST(RunCommand, DeadReckoningIsReportedBesideTheFilter) {
+  RunOptions exact = small_loop("dr_exact");
+  exact.sim.control_noise = false;
+  ASSERT_EQ(run_simulation(exact), 0);
+  nlohmann::json m = read_metrics(exact.out);
+  ASSERT_TRUE(m.contains("dead_reckoning"));
+  EXPECT_LT(m["dead_reckoning"]["pose_rmse_m"].get<double>(), 1e-9);
+  EXPECT_EQ(line_count(exact.out + "/dead_reckoning.csv"), m["steps"].get<std::size_t>() + 1);
+
+  RunOptions noisy = small_loop("dr_noisy");
+  noisy.sim.loops = 2;
+  ASSERT_EQ(run_simulation(noisy), 0);
+  m = read_metrics(noisy.out);
+  const double dr = m["dead_reckoning"]["pose_rmse_m"].get<double>();
+  EXPECT_GT(dr, 3 * m["pose_rmse_m"].get<double>());
+  EXPECT_EQ(m["worse_than_dead_reckoning"], false);
+  for (const char* key : {"pose_rmse_aligned_m", "pose_rpe_translation_rmse_m",
+                          "pose_rpe_rotation_rmse_deg", "pose_alignment", "gospa_m",
+                          "landmark_precision", "landmark_recall"}) {
+    EXPECT_TRUE(m.contains(key)) << key;
+  }
+  EXPECT_LE(m["pose_rmse_aligned_m"].get<double>(), m["pose_rmse_m"].get<double>());
+  std::filesystem::remove_all(exact.out);
+  std::filesystem::remove_all(noisy.out);
+}
+
+// Sensor overrides reach the filter's configuration.
+TEST(RunCommand, SensorRangeAndFieldOfViewOverrideTheSources) {
+  RunOptions o;
+  o.model.max_range = 12.0;
+  o.model.field_of_view = 1.0;
+  LogHeader h;
+  h.sensor.max_range = 30.0;
+  const engine::FilterConfig c = filter_config(o, h);
+  EXPECT_EQ(c.sensor.max_range, 12.0);
+  EXPECT_EQ(c.sensor.field_of_view, 1.0);
+}
+
+// A route whose second waypoint lies inside the car's turning circle ends with an error naming
+// it, instead of running forever.
+TEST(RunCommand, AnUnreachableWaypointFailsFast) {
+  const std::string landmarks = temp_path("stuck_landmarks") + ".csv";
+  const std::string waypoints = temp_path("stuck_waypoints") + ".csv";
+  std::ofstream(landmarks) << "id,x_m,y_m\n0,10,10\n1,20,-10\n";
+  std::ofstream(waypoints) << "index,x_m,y_m\n0,30,0\n1,30,3\n2,0,0\n";
+  RunOptions o = small_loop("stuck");
+  o.landmarks_csv = landmarks;
+  o.waypoints_csv = waypoints;
+  o.sim.at_waypoint = 0.5;
+  const std::string error = error_of(o);
+  EXPECT_NE(error.find("waypoint 2 of 3, at (30.00, 3.00), not reached"), std::string::npos) << error;
+  std::filesystem::remove(landmarks);
+  std::filesystem::remove(waypoints);
+  std::filesystem::remove_all(o.out);
 }
 
 }  // namespace

@@ -167,5 +167,48 @@ TEST(Simulator, RefusesUnusableConfigurations) {
   EXPECT_THROW(Simulator(empty, SimConfig{}, 1), std::invalid_argument);
 }
 
+// A waypoint 3 m to the side of the car, which turns no tighter than 6.9 m (wheelbase 4 m,
+// 30 deg): the car circles it. The run must stop, naming it, within the time it allows.
+TEST(Simulator, AWaypointInsideTheTurningCircleStopsTheRunNamingIt) {
+  World world;
+  world.start_theta = 0.0;
+  world.waypoints = {{30, 0}, {30, 3}, {0, 0}};
+  world.landmarks = {{10, 10}};
+  SimConfig config;
+  config.at_waypoint = 0.5;
+  Simulator sim(world, config, 1);
+  SimStep step;
+  std::uint64_t steps = 0;
+  try {
+    while (sim.next(step)) ++steps;
+    FAIL() << "the run ended";
+  } catch (const std::runtime_error& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("waypoint 2 of 3, at (30.00, 3.00), not reached"), std::string::npos)
+        << message;
+    EXPECT_NE(message.find("turning circle has a radius of 6.93 m"), std::string::npos) << message;
+  }
+  // Allowed: 3 x ((3 m + 2 pi 6.93 m) / 3 m/s + 3 s + dt) = 55.6 s after reaching waypoint 0,
+  // about 10 s away.
+  EXPECT_LT(static_cast<double>(steps) * config.dt, 70.0);
+  EXPECT_GT(static_cast<double>(steps) * config.dt, 55.0);
+}
+
+// The same route with the side waypoint beyond the turning circle is driven to the end.
+TEST(Simulator, AReachableRouteIsNotStopped) {
+  World world;
+  world.waypoints = {{30, 0}, {30, 30}, {0, 30}, {0, 0}};
+  world.landmarks = {{10, 10}};
+  Simulator sim(world, SimConfig{}, 1);
+  SimStep step;
+  EXPECT_NO_THROW(while (sim.next(step)) {});
+}
+
+TEST(Simulator, RefusesANonPositiveWaypointRadius) {
+  SimConfig bad;
+  bad.at_waypoint = 0;
+  EXPECT_THROW(Simulator(square_world(), bad, 1), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace fastslam::tools

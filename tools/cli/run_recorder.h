@@ -1,0 +1,79 @@
+// What a run records while it goes, in memory bounded by the gaps between scans rather than by
+// the run's length: the estimated trajectory (the pose after every control, at the source's
+// reported point), the truth poses and GPS fixes, and the dead-reckoning baseline of the same
+// controls, each written to its file in the output directory as it arrives and fed to the
+// streaming trajectory evaluation (tools/eval/trajectory_metrics.h) against the truth and
+// against GPS.
+//
+// Ownership: owns its files and evaluators. Thread safety: thread-compatible.
+// Costs: O(1) per control, truth pose or fix plus a buffered file write; memory O(controls
+// between two estimate batches).
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "engine/filter.h"
+#include "tools/eval/dead_reckoning.h"
+#include "tools/eval/trajectory_metrics.h"
+#include "tools/io/log_format.h"
+#include "tools/io/tum.h"
+
+namespace fastslam::tools {
+
+// Errors of one trajectory (the filter's or dead reckoning's) against each reference.
+struct TrajectoryScores {
+  std::optional<TrajectoryMetrics> truth;  // when the source has truth poses
+  std::optional<TrajectoryMetrics> gps;    // when it has GPS fixes
+};
+
+struct RecordedRun {
+  TrajectoryScores filter;
+  TrajectoryScores dead_reckoning;  // both empty when the model ignores the controls
+  std::optional<StampedPose> last_truth;
+  std::uint64_t truth_poses = 0, gps_fixes = 0;
+  std::vector<std::string> files;  // written, in order
+};
+
+class RunRecorder {
+ public:
+  // `header`: the source's start pose and motion model (dead reckoning's); `reported`: where
+  // the source's pose sits from the point the filter tracks; `out_dir`: empty for no files;
+  // `rpe_delta`: metres of reference path per relative-error pair. Throws std::runtime_error
+  // naming a file it cannot create.
+  RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
+              const std::string& out_dir, double rpe_delta);
+  ~RunRecorder();
+
+  void control(const Event& event);
+  void truth(const Event& event);
+  void gps(const Event& event);
+  // The filter's poses after the controls since the last batch (Filter::take_trajectory).
+  void estimates(std::span<const engine::TrajectoryPoint> points);
+
+  // Closes the files (throws std::runtime_error naming one that failed) and scores.
+  RecordedRun finish();
+
+ private:
+  class PoseFile;
+
+  PoseFile& file(std::unique_ptr<PoseFile>& slot, const char* name, bool position_only);
+
+  engine::SensorOffset reported_;
+  std::string out_dir_;
+  DeadReckoning dead_reckoning_;
+  TrajectoryEvaluator filter_truth_, filter_gps_, dr_truth_, dr_gps_;
+  std::deque<double> control_times_;  // of controls not yet in an estimate batch
+  std::uint64_t first_pending_control_ = 0;
+  std::unique_ptr<PoseFile> trajectory_csv_, trajectory_tum_, truth_csv_, gps_csv_, dr_csv_;
+  std::optional<StampedPose> last_truth_;
+  std::uint64_t truth_poses_ = 0, gps_fixes_ = 0;
+};
+
+}  // namespace fastslam::tools

@@ -1,0 +1,67 @@
+// What `fastslam run` reports once the events are done: the scores of the map against the true
+// landmarks, metrics.json (docs/metrics.md has every key) and the summary printed to stdout,
+// whose headline gives each error beside its dead-reckoning baseline and warns when the filter
+// ended worse than that baseline.
+//
+// Ownership: plain values. Thread safety: pure functions. Costs: scoring the map is
+// O(N log N) for N landmarks (tools/eval/map_metrics.h); the rest is O(1).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "engine/filter.h"
+#include "engine/filter_config.h"
+#include "tools/cli/run_command.h"
+#include "tools/cli/run_recorder.h"
+#include "tools/datasets/source.h"
+#include "tools/eval/map_evaluation.h"
+#include "tools/eval/map_metrics.h"
+
+namespace fastslam::tools {
+
+// The map against the true landmarks the run observed.
+struct MapScores {
+  MapScore paired;           // greedy pairs within the match radius (the RMSE's)
+  double rmse = 0.0;         // known association: by id; else paired.rmse_m
+  Gospa gospa;               // cutoff = the match radius, order 2, observed landmarks only
+  double precision = 0.0;    // of the optimal matching within the match radius
+  double recall = 0.0;
+  std::size_t observed = 0;  // true landmarks observed
+};
+
+// Everything a run measured.
+struct RunResult {
+  engine::Estimate estimate;
+  engine::FilterStatistics stats;
+  RecordedRun trajectories;
+  std::optional<MapScores> map;  // when the source has true landmarks
+  double open_seconds = 0.0;     // opening the source: reading and parsing a recorded one
+  double source_seconds = 0.0;   // its events after that (for a simulator: simulating)
+  double filter_seconds = 0.0;   // the filter, trace rows excluded
+  std::string ended_by = "end of data";  // or "--max-steps", "--max-seconds"
+  std::uint64_t unlabelled_discarded = 0;
+};
+
+struct RunSettings {
+  const RunOptions& options;
+  const SourceInfo& info;
+  const engine::FilterConfig& config;
+  const AssociationChoice& association;
+  std::uint32_t particles;
+};
+
+// True when the filter's error against the run's reference (truth, else GPS) exceeds dead
+// reckoning's: it did worse than ignoring every observation.
+bool worse_than_dead_reckoning(const RunResult& r);
+
+nlohmann::json metrics_json(const RunSettings& s, const RunResult& r);
+
+// The headline and the detail lines on stdout; the dead-reckoning warning on stderr.
+void print_summary(const RunSettings& s, const RunResult& r);
+
+}  // namespace fastslam::tools
