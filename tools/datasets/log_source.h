@@ -8,6 +8,7 @@
 
 #include <cstddef>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tools/datasets/source.h"
@@ -17,8 +18,10 @@ namespace fastslam::tools {
 
 class LogSource final : public Source {
  public:
-  // `name` is the info's name (the file or directory read); `summary` the line convert prints.
-  LogSource(Log log, std::string name, std::string summary = {});
+  // `name` is the info's name (the file or directory read); `summary` the line convert prints;
+  // `metrics` go to metrics.json as they are.
+  LogSource(Log log, std::string name, std::string summary = {},
+            std::vector<std::pair<std::string, double>> metrics = {});
   bool next(Event& event, std::vector<engine::Observation>& scan) override;
 
  private:
