@@ -93,6 +93,13 @@ void add_config_option(CLI::App& cmd, RunWords& w) {
       ->check(CLI::ExistingFile);
 }
 
+// The UTIAS MRCLAM reader's options (run and convert).
+void add_utias_options(CLI::App& cmd, RunOptions& o) {
+  cmd.add_option("--robot", o.utias.robot, "utias: the robot whose run is read (1-5)")
+      ->check(CLI::Range(1, kUtiasRobots))
+      ->capture_default_str();
+}
+
 // The Victoria Park reader's options (run and convert): heading fit, control cuts, the gate.
 void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--heading-fit-seconds", o.victoria_park.heading_fit_seconds,
@@ -198,6 +205,7 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--initial-heading-deg", w.initial_heading_deg,
                  "start heading, degrees (default: the source's; victoria-park fits it to GPS)");
   add_victoria_park_options(cmd, o, w);
+  add_utias_options(cmd, o);
   add_output_options(cmd, o, w);
 }
 
@@ -212,6 +220,7 @@ void add_convert_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   add_world_options(cmd, o, w);
   cmd.add_option("--seed", o.filter.seed, "random seed of the simulation")->capture_default_str();
   add_victoria_park_options(cmd, o, w);
+  add_utias_options(cmd, o);
   cmd.add_option("--out", o.out, "the log file to write (docs/log-format.md); required");
   add_config_option(cmd, w);
 }

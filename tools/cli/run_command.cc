@@ -273,6 +273,7 @@ SourceOptions source_options(const RunOptions& o) {
   s.sim.loop_length = o.loop_length;
   s.sim.config = o.sim;
   s.victoria_park = o.victoria_park;
+  s.utias = o.utias;
   return s;
 }
 

@@ -18,6 +18,7 @@
 #include "engine/filter_config.h"
 #include "tools/datasets/sim_source.h"
 #include "tools/datasets/source.h"
+#include "tools/datasets/utias.h"
 #include "tools/datasets/victoria_park.h"
 #include "tools/sim/simulator.h"
 
@@ -89,6 +90,8 @@ struct RunOptions {
   std::optional<double> initial_heading;
   // --source victoria-park: the reader's options (gate, geometry, heading fit).
   VictoriaParkOptions victoria_park;
+  // --source utias: the robot (--robot).
+  UtiasOptions utias;
   std::string out;  // output directory; empty: metrics to stdout only
   // Errors over time: a CSV row every `trace_every` scans (after the scan's update) with
   // t, scan, pose_error_m (weighted-mean position against the latest truth pose, empty when the

@@ -6,7 +6,9 @@
 
 namespace fastslam::tools {
 
-LogSource::LogSource(Log log, std::string name, std::string summary) : log_(std::move(log)) {
+LogSource::LogSource(Log log, std::string name, std::string summary,
+                     std::vector<std::pair<std::string, double>> metrics)
+    : log_(std::move(log)) {
   info_.header = log_.header;
   info_.landmarks = log_.landmarks;
   for (const Event& e : log_.events) info_.expected_controls += e.kind == EventKind::kControl;
@@ -17,6 +19,7 @@ LogSource::LogSource(Log log, std::string name, std::string summary) : log_(std:
                                                       : Labels::kSome;
   info_.name = std::move(name);
   info_.summary = std::move(summary);
+  info_.metrics = std::move(metrics);
 }
 
 bool LogSource::next(Event& e, std::vector<engine::Observation>& scan) {

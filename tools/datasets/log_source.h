@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tools/datasets/source.h"
@@ -18,8 +19,10 @@ namespace fastslam::tools {
 
 class LogSource final : public Source {
  public:
-  // `name` is the info's name (the file or directory read); `summary` the line convert prints.
-  LogSource(Log log, std::string name, std::string summary = {});
+  // `name` is the info's name (the file or directory read); `summary` the line convert prints;
+  // `metrics` go to metrics.json as they are.
+  LogSource(Log log, std::string name, std::string summary = {},
+            std::vector<std::pair<std::string, double>> metrics = {});
   bool next(Event& event, std::vector<engine::Observation>& scan) override;
   // "FILE:LINE" when the log was read from a file.
   std::string where(std::uint64_t index) const override;

@@ -6,11 +6,13 @@
 namespace fastslam::tools {
 
 // The factories, each defined in its source's file (sim_source.cc, log_source.cc,
-// victoria_park_source.cc). A new source: its factory here and its line in the table.
+// victoria_park_source.cc, utias_source.cc). A new source: its factory here and its line in the
+// table.
 std::unique_ptr<Source> open_sim_source(const SourceOptions& options);
 std::unique_ptr<Source> open_log_source(const SourceOptions& options);
 std::unique_ptr<Source> open_victoria_park_source(const SourceOptions& options);
 FilterDefaults victoria_park_filter_defaults();
+std::unique_ptr<Source> open_utias_source(const SourceOptions& options);
 
 std::string Source::where(std::uint64_t index) const {
   return info_.name + ", event " + std::to_string(index);
@@ -21,6 +23,7 @@ std::span<const SourceEntry> sources() {
       {"sim", &open_sim_source, {}},
       {"log", &open_log_source, {}},
       {"victoria-park", &open_victoria_park_source, victoria_park_filter_defaults()},
+      {"utias", &open_utias_source, {}},
   };
   return kSources;
 }

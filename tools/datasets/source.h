@@ -20,6 +20,7 @@
 
 #include "engine/filter.h"
 #include "tools/datasets/sim_source.h"
+#include "tools/datasets/utias.h"
 #include "tools/datasets/victoria_park.h"
 #include "tools/io/log_format.h"
 
@@ -32,6 +33,7 @@ struct SourceOptions {
   bool clutter = true;     // simulated false alarms passed on (id -1)
   SimWorldOptions sim;
   VictoriaParkOptions victoria_park;
+  UtiasOptions utias;
 };
 
 // Settings a data set recommends beyond its header's models; the command line applies each one

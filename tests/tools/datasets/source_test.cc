@@ -21,7 +21,7 @@ using testing::temp_path;
 
 TEST(SourceRegistry, ListsEverySourceOnceAndFindsThemByName) {
   const std::vector<std::string> names = source_names();
-  EXPECT_EQ(names, (std::vector<std::string>{"sim", "log", "victoria-park"}));
+  EXPECT_EQ(names, (std::vector<std::string>{"sim", "log", "victoria-park", "utias"}));
   for (const std::string& name : names) {
     const SourceEntry& entry = find_source(name);
     EXPECT_EQ(entry.name, name);
@@ -32,7 +32,7 @@ TEST(SourceRegistry, ListsEverySourceOnceAndFindsThemByName) {
     FAIL() << "an unknown source was found";
   } catch (const std::invalid_argument& e) {
     EXPECT_EQ(std::string(e.what()),
-              "--source 'mrclam' is not supported (sim, log, victoria-park)");
+              "--source 'mrclam' is not supported (sim, log, victoria-park, utias)");
   }
 }
 
