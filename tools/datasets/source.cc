@@ -13,6 +13,7 @@ std::unique_ptr<Source> open_log_source(const SourceOptions& options);
 std::unique_ptr<Source> open_victoria_park_source(const SourceOptions& options);
 FilterDefaults victoria_park_filter_defaults();
 std::unique_ptr<Source> open_utias_source(const SourceOptions& options);
+FilterDefaults utias_filter_defaults();
 
 std::string Source::where(std::uint64_t index) const {
   return info_.name + ", event " + std::to_string(index);
@@ -23,7 +24,7 @@ std::span<const SourceEntry> sources() {
       {"sim", &open_sim_source, {}},
       {"log", &open_log_source, {}},
       {"victoria-park", &open_victoria_park_source, victoria_park_filter_defaults()},
-      {"utias", &open_utias_source, {}},
+      {"utias", &open_utias_source, utias_filter_defaults()},
   };
   return kSources;
 }

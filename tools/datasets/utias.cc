@@ -117,6 +117,36 @@ std::string file_of(int robot, const char* what) {
   return "Robot" + std::to_string(robot) + "_" + what + ".dat";
 }
 
+// Near +-pi the resampled Vicon heading has runs of a few rows averaged across the wrap (off by
+// up to pi for 20-80 ms). A row is such a glitch when it is farther from the last good heading
+// than kUtiasMaxHeadingStep per row since; a run of glitches is replaced by the straight turn
+// between the good rows around it. A run longer than kUtiasMaxGlitchRows is taken as real (the
+// heading starts over from it). Returns the rows replaced.
+std::size_t repair_headings(std::vector<std::array<double, 3>>& poses) {
+  std::size_t repaired = 0;
+  std::size_t good = 0;  // the last good row
+  std::vector<std::size_t> run;
+  for (std::size_t k = 1; k < poses.size(); ++k) {
+    const double step = engine::wrap_angle(poses[k][2] - poses[good][2]);
+    if (std::abs(step) > kUtiasMaxHeadingStep * static_cast<double>(run.size() + 1)) {
+      run.push_back(k);
+      if (run.size() > kUtiasMaxGlitchRows) {
+        good = k;
+        run.clear();
+      }
+      continue;
+    }
+    for (std::size_t j = 0; j < run.size(); ++j) {
+      const double f = static_cast<double>(j + 1) / static_cast<double>(run.size() + 1);
+      poses[run[j]][2] = engine::wrap_angle(poses[good][2] + f * step);
+    }
+    repaired += run.size();
+    run.clear();
+    good = k;
+  }
+  return repaired;
+}
+
 }  // namespace
 
 Utias read_utias(const std::string& dir, const UtiasOptions& options) {
@@ -190,21 +220,21 @@ Utias read_utias(const std::string& dir, const UtiasOptions& options) {
 
   {
     TableReader reader(dir, file_of(options.robot, "Groundtruth"), {"time", "x", "y", "heading"});
+    std::vector<std::array<double, 3>> poses;
     while (reader.next(row)) {
-      const std::size_t k = reader.rows() - 1;
-      check_row_time(reader, row[0], k);
-      if (k == 0) {
-        log.header.start_pose[0] = row[1];
-        log.header.start_pose[1] = row[2];
-        log.header.start_pose[2] = engine::wrap_angle(row[3]);
-      }
+      check_row_time(reader, row[0], reader.rows() - 1);
+      poses.push_back({row[1], row[2], engine::wrap_angle(row[3])});
+    }
+    out.truth_headings_repaired = repair_headings(poses);
+    for (std::size_t k = 0; k < poses.size(); ++k) {
+      if (k == 0) std::copy(poses[0].begin(), poses[0].end(), log.header.start_pose);
       if (k % static_cast<std::size_t>(options.truth_every) != 0) continue;
       Event e;
       e.kind = EventKind::kTruthPose;
       e.time = static_cast<double>(k) / 50.0;
-      e.x = row[1];
-      e.y = row[2];
-      e.theta = engine::wrap_angle(row[3]);
+      e.x = poses[k][0];
+      e.y = poses[k][1];
+      e.theta = poses[k][2];
       events.push_back(e);
       ++out.truth_poses;
     }

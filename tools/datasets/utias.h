@@ -1,7 +1,8 @@
 // UTIAS MRCLAM dataset 1 (../shared/data/utias_mrclam/README.md) read into a native `Log`
 // (tools/io/log_format.h) for one of its five robots: odometry samples as unicycle controls
 // (v, omega), the camera's detections grouped by their time as scans, Vicon poses as truth
-// poses, in one time order (control, scan, truth on equal times), with the 15 Vicon landmarks
+// poses (headings glitched by the resampling repaired), in one time order (control, scan, truth
+// on equal times), with the 15 Vicon landmarks
 // (11 and 17 swapped back) as the true map. Detections of other robots are dropped, barcodes
 // Barcodes.dat does not list pass on unlabelled (id -1); both are counted. Reading is strict:
 // a malformed row throws std::runtime_error "<file>:<line>: <reason>" and nothing is
@@ -33,6 +34,11 @@ inline constexpr double kUtiasFieldOfView = 1.06;     // rad
 inline constexpr int kUtiasRobots = 5;             // subjects 1-5; the others are landmarks
 inline constexpr double kUtiasPeriod = 0.02;       // s: odometry and Vicon rows, 50 Hz from 0
 inline constexpr double kUtiasExactBefore = 1000;  // s: later times print rounded to 0.1 s
+// rad per Vicon row: a heading changing faster is a glitch of the resampling (the robots turn
+// at most 0.57 rad/s, 0.011 rad per row); runs of at most kUtiasMaxGlitchRows such rows (the
+// longest in dataset 1 is 4) are repaired (utias.cc repair_headings).
+inline constexpr double kUtiasMaxHeadingStep = 0.05;
+inline constexpr std::size_t kUtiasMaxGlitchRows = 10;
 
 struct UtiasOptions {
   int robot = 1;  // 1..kUtiasRobots
@@ -51,6 +57,7 @@ struct Utias {
   std::size_t odometry_samples = 0;
   std::size_t truth_rows = 0;           // Vicon rows read
   std::size_t truth_poses = 0;          // of them, every truth_every-th
+  std::size_t truth_headings_repaired = 0;  // Vicon rows whose heading was a glitch
   std::size_t measurements = 0;         // rows of RobotN_Measurement.dat
   std::size_t scans = 0;                // detections grouped by time
   std::size_t landmark_detections = 0;  // with a landmark's subject as id
