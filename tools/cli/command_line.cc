@@ -287,6 +287,11 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   for (const SourceEntry& source : sources()) {
     if (source.name == o.source) apply_filter_defaults(source.defaults, given, o);
   }
+  // A procedural world's maps are paired within half its landmark spacing.
+  if (o.source == "sim" && o.landmarks_csv.empty() && !given("--match-radius")) {
+    o.match_radius = 0.5 * o.spacing.value_or(o.world == "grid" ? kDefaultGridSpacing
+                                                                : kDefaultLoopSpacing);
+  }
   if (given("--vp-min-bearing-deg")) {
     o.victoria_park.gate.min_bearing = w.vp_min_bearing_deg * std::numbers::pi / 180;
   }
@@ -339,7 +344,8 @@ void add_association_options(CLI::App& cmd, RunOptions& o) {
                "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
   cmd.add_option("--match-radius", o.match_radius,
                  "metres within which estimated and true landmarks are paired (precision, "
-                 "recall, the landmark RMSE of ml and das) and GOSPA's cutoff")
+                 "recall, the landmark RMSE of ml and das) and GOSPA's cutoff (default: the "
+                 "source's; half the spacing of a procedural world)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd.add_option("--rpe-delta", o.rpe_delta,

@@ -145,6 +145,9 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
     m["gospa_cutoff_m"] = s.options.match_radius;
     m["gospa_order"] = 2;
     m["ospa_m"] = map.gospa.ospa;
+    // Components of the pair graph too large to solve exactly were paired greedily: the GOSPA
+    // is then an upper bound (tools/eval/map_metrics.h).
+    m["gospa_inexact_components"] = map.gospa.inexact_components;
   }
   if (config.association != engine::Association::kKnown) {
     m["landmarks_created"] = st.landmarks_created;
@@ -191,9 +194,9 @@ void print_summary(const RunSettings& s, const RunResult& r) {
     std::printf("  mixed association: %llu unlabelled detections discarded\n",
                 static_cast<unsigned long long>(r.unlabelled_discarded));
   }
-  std::printf("  filter %.3f s, %s %.3f s (opening %.3f s)\n", r.filter_seconds,
+  std::printf("  filter %.3f s, %s %.3f s (opening %.3f s), peak RSS %.1f MB\n", r.filter_seconds,
               s.info.simulated ? "simulator" : "reading", r.open_seconds + r.source_seconds,
-              r.open_seconds);
+              r.open_seconds, static_cast<double>(peak_rss_bytes()) / 1e6);
   if (worse_than_dead_reckoning(r)) {
     std::fprintf(stderr,
                  "warning: the filter's position error is larger than dead reckoning's on the same "

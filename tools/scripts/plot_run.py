@@ -1,6 +1,8 @@
 #!/usr/bin/python3
-"""Draws a `fastslam run` output directory: true path, GPS fixes, estimated path, true landmarks
-and the estimated map (with 2-sigma ellipses when few enough), into DIR/map.png. A large map
+"""Draws a `fastslam run` output directory: true path, GPS fixes, estimated path (as run, and
+moved by the rigid alignment metrics.json reports onto the truth or GPS), the dead-reckoning
+path, true landmarks and the estimated map (with 2-sigma ellipses when few enough), into
+DIR/map.png. A large map
 (more than 2000 landmarks, e.g. the built-in stress run's 10^5) gets a second panel: a zoom on
 a window of about 150 true landmarks where the true path passes nearest the middle of the map,
 where single landmarks, their estimates and ellipses are visible.
@@ -48,7 +50,15 @@ def shown(rows, label, limit=25000):
     return rows[::step], label if step == 1 else "{} (1 in {} shown)".format(label, step)
 
 
-def draw(ax, truth, est, gps, true_lm, lm, small, ellipses):
+def aligned(rows, alignment):
+    """The path moved by metrics.json's alignment (rotation_deg, x_m, y_m)."""
+    a = math.radians(alignment["rotation_deg"])
+    c, s = math.cos(a), math.sin(a)
+    return [{"x": c * r["x"] - s * r["y"] + alignment["x_m"],
+             "y": s * r["x"] + c * r["y"] + alignment["y_m"]} for r in rows]
+
+
+def draw(ax, truth, est, gps, true_lm, lm, small, ellipses, dead_reckoning=(), est_aligned=()):
     """Landmarks under the paths; `small`: markers for a few landmarks, else dots."""
     if true_lm:
         rows, label = shown(true_lm, "true landmarks")
@@ -69,9 +79,15 @@ def draw(ax, truth, est, gps, true_lm, lm, small, ellipses):
     if gps:
         ax.scatter([r["x"] for r in gps], [r["y"] for r in gps], s=1, color="tab:green",
                    label="GPS fixes")
+    if dead_reckoning:
+        ax.plot([r["x"] for r in dead_reckoning], [r["y"] for r in dead_reckoning],
+                color="0.6", lw=0.7, ls="--", label="dead reckoning")
     if est:
         ax.plot([r["x"] for r in est], [r["y"] for r in est], color="tab:blue", lw=0.8,
                 label="estimated path (weighted mean)")
+    if est_aligned:
+        ax.plot([r["x"] for r in est_aligned], [r["y"] for r in est_aligned],
+                color="tab:cyan", lw=0.8, ls="-.", label="estimated path, rigidly aligned")
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -123,6 +139,10 @@ def main():
         with open(os.path.join(out, "metrics.json")) as f:
             metrics = json.load(f)
 
+    dead_reckoning = thin(read(os.path.join(out, "dead_reckoning.csv")))
+    alignment = metrics.get("pose_alignment") or metrics.get("gps_alignment")
+    est_aligned = aligned(est, alignment) if alignment else []
+
     small = len(lm) <= 2000 and len(true_lm) <= 2000
     zoom = not small and truth_all and true_lm
     if zoom:
@@ -130,7 +150,8 @@ def main():
                                      gridspec_kw={"width_ratios": [1, 1]})
     else:
         fig, ax = plt.subplots(figsize=(9, 9), dpi=110)
-    draw(ax, truth, est, gps, true_lm, lm, small, ellipses=len(lm) <= 500)
+    draw(ax, truth, est, gps, true_lm, lm, small, ellipses=len(lm) <= 500,
+         dead_reckoning=dead_reckoning, est_aligned=est_aligned)
 
     if zoom:
         box = zoom_box(true_lm, truth_all)
@@ -157,8 +178,16 @@ def main():
     if metrics:
         errors = ["{} {:.2f} m".format(name, metrics[key])
                   for key, name in (("pose_rmse_m", "pose RMSE"),
-                                    ("landmark_rmse_m", "landmark RMSE"),
-                                    ("gps_rmse_m", "GPS RMSE")) if key in metrics]
+                                    ("pose_rmse_aligned_m", "aligned"),
+                                    ("gps_rmse_m", "GPS RMSE"),
+                                    ("gps_rmse_aligned_m", "aligned"),
+                                    ("gospa_m", "map GOSPA"),
+                                    ("landmark_rmse_m", "landmark RMSE")) if key in metrics]
+        baseline = metrics.get("dead_reckoning", {})
+        for key, name in (("pose_rmse_m", "dead reckoning"), ("gps_rmse_m", "dead reckoning")):
+            if key in baseline and key in metrics:
+                errors.append("{} {:.2f} m".format(name, baseline[key]))
+                break
         title = "{} M={} {} association, seed {}".format(
             metrics.get("algorithm"), metrics.get("particles"), metrics.get("association"),
             metrics.get("seed"))
