@@ -72,14 +72,26 @@ class TruthTracker {
     return known ? landmark_rmse_by_id(map, landmarks_) : score(map, match_radius).rmse_m;
   }
   // Everything run_report.h reports of the map.
-  MapScores scores(std::span<const engine::MapLandmark> map, bool known,
-                   double match_radius) const {
+  // `alignment`: the rigid motion that best fits the path onto the truth, also applied to the
+  // map for gospa_aligned.
+  MapScores scores(std::span<const engine::MapLandmark> map, bool known, double match_radius,
+                   const std::optional<AlignedAte>& alignment) const {
     MapScores s;
     s.paired = score(map, match_radius);
     s.rmse = known ? landmark_rmse_by_id(map, landmarks_) : s.paired.rmse_m;
     s.observed = observed_count();
-    const std::vector<Point> estimated = positions(map);
-    s.gospa = gospa(estimated, points_, index_, observed(), {.cutoff = match_radius, .order = 2});
+    std::vector<Point> estimated = positions(map);
+    const GospaOptions options{.cutoff = match_radius, .order = 2};
+    s.gospa = gospa(estimated, points_, index_, observed(), options);
+    if (alignment) {
+      std::vector<Point> moved(estimated.size());
+      const double c = std::cos(alignment->rotation), sn = std::sin(alignment->rotation);
+      for (std::size_t i = 0; i < moved.size(); ++i) {
+        const Point& p = estimated[i];
+        moved[i] = {c * p.x - sn * p.y + alignment->x, sn * p.x + c * p.y + alignment->y};
+      }
+      s.gospa_aligned = gospa(moved, points_, index_, observed(), options);
+    }
     const Detection d = precision_recall(estimated, points_, index_, observed(), match_radius);
     s.precision = d.precision;
     s.recall = d.recall;
@@ -403,8 +415,10 @@ int run_simulation(const RunOptions& options) {
   }
   r.trajectories = recorder.finish();
   if (!info.landmarks.empty()) {
+    std::optional<AlignedAte> alignment;
+    if (r.trajectories.filter.truth) alignment = r.trajectories.filter.truth->aligned;
     r.map = truth.scores(r.estimate.map, association.engine == engine::Association::kKnown,
-                         options.match_radius);
+                         options.match_radius, alignment);
   }
   const RunSettings settings{options, info, config, association, particles};
   const nlohmann::json metrics = metrics_json(settings, r);

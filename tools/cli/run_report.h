@@ -29,6 +29,9 @@ struct MapScores {
   MapScore paired;           // greedy pairs within the match radius (the RMSE's)
   double rmse = 0.0;         // known association: by id; else paired.rmse_m
   Gospa gospa;               // cutoff = the match radius, order 2, observed landmarks only
+  // The same after the rigid motion that aligns the path with the truth: the map's shape
+  // apart from its placement.
+  std::optional<Gospa> gospa_aligned;
   double precision = 0.0;    // of the optimal matching within the match radius
   double recall = 0.0;
   std::size_t observed = 0;  // true landmarks observed

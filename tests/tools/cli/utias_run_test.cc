@@ -1,0 +1,67 @@
+// End to end on UTIAS MRCLAM dataset 1 (../shared): `fastslam run --source utias --robot N` with
+// no other flag, for each of the five robots, as the command line parses it (the source's
+// defaults: mixed association, maps paired within 0.5 m, RPE over 1 m). A run is a
+// deterministic function of the seed, so the bounds are the measured values with a margin
+// (docs/utias.md has them over seeds 1-10): the path's shape within decimetres of Vicon, the
+// map's too once placed by the path's alignment, dead reckoning far worse. About 2 s in
+// release; labelled "end-to-end", which the sanitizer presets leave out.
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "tests/shared_data.h"
+#include "tests/tools/temp_path.h"
+#include "tools/cli/command_line.h"
+#include "tools/cli/run_command.h"
+
+namespace fastslam::tools {
+namespace {
+
+nlohmann::json run(const std::string& args, const std::string& name) {
+  const std::string out = testing::temp_path("utias_" + name);
+  CLI::App app;
+  RunOptions o;
+  RunWords w;
+  add_run_options(app, o, w);
+  app.parse(args + " --no-progress --no-plot --out " + out, false);
+  finish_run_options(app, w, o);
+  EXPECT_EQ(run_simulation(o), 0);
+  std::ifstream in(out + "/metrics.json");
+  nlohmann::json metrics = nlohmann::json::parse(in);
+  std::filesystem::remove_all(out);
+  return metrics;
+}
+
+TEST(UtiasRun, EveryRobotRunsWithNoOtherFlag) {
+  FASTSLAM_REQUIRE_SHARED(shared);
+  const std::string data = shared + "/data/utias_mrclam/dataset1";
+  for (int robot = 1; robot <= 5; ++robot) {
+    SCOPED_TRACE("robot " + std::to_string(robot));
+    const nlohmann::json m =
+        run("--source utias --data " + data + " --robot " + std::to_string(robot),
+            std::to_string(robot));
+    EXPECT_EQ(m["association"], "mixed");
+    EXPECT_EQ(m["association_requested"], "auto");
+    EXPECT_EQ(m["steps"], 75000);
+    EXPECT_EQ(m["ended_by"], "end of data");
+    EXPECT_EQ(m["true_landmarks"], 15);
+    EXPECT_EQ(m["match_radius_m"], 0.5);
+    EXPECT_EQ(m["rpe_delta_m"], 1.0);
+    EXPECT_GT(m["pose_rpe_pairs"].get<int>(), 30);
+    // Seed 1 measured 0.14-0.27 m aligned, 0.48-1.11 m raw (a rotation about the start pose
+    // the standing start's heading noise leaves), dead reckoning 1.5-6.6 m.
+    EXPECT_LT(m["pose_rmse_aligned_m"].get<double>(), 0.4);
+    EXPECT_LT(m["pose_rmse_m"].get<double>(), 2.0);
+    EXPECT_GT(m["dead_reckoning"]["pose_rmse_m"].get<double>(),
+              1.5 * m["pose_rmse_m"].get<double>());
+    EXPECT_EQ(m["worse_than_dead_reckoning"], false);
+    EXPECT_LT(m["gospa_aligned_m"].get<double>(), 1.5);
+    EXPECT_LE(m["gospa_aligned_missed"].get<int>(), 2);
+  }
+}
+
+}  // namespace
+}  // namespace fastslam::tools
