@@ -75,8 +75,6 @@ void apply_filter_defaults(const FilterDefaults& d, const Given& given, RunOptio
   if (d.existence_missed && !given("--existence-missed")) {
     o.filter.existence.missed = *d.existence_missed;
   }
-  if (d.match_radius && !given("--match-radius")) o.match_radius = *d.match_radius;
-  if (d.rpe_delta && !given("--rpe-delta")) o.rpe_delta = *d.rpe_delta;
   if (o.filter.algorithm == Algorithm::kFastSlam2) {
     if (d.fastslam2_sigma_range && !given("--sigma-range")) {
       o.model.sigma_range = d.fastslam2_sigma_range;
@@ -141,7 +139,7 @@ void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
 }
 
 // Option groups of `run`, defined at the end of the file.
-void add_association_options(CLI::App& cmd, RunOptions& o);
+void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w);
 void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w);
 void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w);
 
@@ -178,7 +176,7 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::IsMember(std::vector<std::string>(std::begin(kAssociationModes),
                                                      std::end(kAssociationModes))))
       ->capture_default_str();
-  add_association_options(cmd, o);
+  add_association_options(cmd, o, w);
   add_execution_options(cmd, o, w);
   cmd.add_option("--sigma-range", w.sigma_range,
                  "filter range noise, m (default: the source's; the simulator keeps its own)")
@@ -283,14 +281,11 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   if (given("--max-range")) o.model.max_range = w.max_range;
   if (given("--field-of-view-deg")) o.model.field_of_view = w.field_of_view_deg * std::numbers::pi / 180;
   if (given("--max-steps")) o.max_steps = w.max_steps;
+  if (given("--match-radius")) o.match_radius = w.match_radius;
+  if (given("--rpe-delta")) o.rpe_delta = w.rpe_delta;
   if (given("--max-seconds")) o.max_seconds = w.max_seconds;
   for (const SourceEntry& source : sources()) {
     if (source.name == o.source) apply_filter_defaults(source.defaults, given, o);
-  }
-  // A procedural world's maps are paired within half its landmark spacing.
-  if (o.source == "sim" && o.landmarks_csv.empty() && !given("--match-radius")) {
-    o.match_radius = 0.5 * o.spacing.value_or(o.world == "grid" ? kDefaultGridSpacing
-                                                                : kDefaultLoopSpacing);
   }
   if (given("--vp-min-bearing-deg")) {
     o.victoria_park.gate.min_bearing = w.vp_min_bearing_deg * std::numbers::pi / 180;
@@ -309,7 +304,7 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
 namespace {
 
 // Association, existence and the map's scoring (ml, das, ekf).
-void add_association_options(CLI::App& cmd, RunOptions& o) {
+void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   engine::FilterConfig& f = o.filter;
   cmd.add_option("--log-p0", f.log_new_landmark,
                  "ln p0, the log-likelihood of a new landmark (ml, das)")
@@ -342,16 +337,15 @@ void add_association_options(CLI::App& cmd, RunOptions& o) {
       ->capture_default_str();
   cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
                "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
-  cmd.add_option("--match-radius", o.match_radius,
+  cmd.add_option("--match-radius", w.match_radius,
                  "metres within which estimated and true landmarks are paired (precision, "
                  "recall, the landmark RMSE of ml and das) and GOSPA's cutoff (default: the "
-                 "source's; half the spacing of a procedural world)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd.add_option("--rpe-delta", o.rpe_delta,
-                 "metres of true path between the poses of a relative pose error pair")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+                 "source's, 5; half the spacing of a procedural world)")
+      ->check(CLI::PositiveNumber);
+  cmd.add_option("--rpe-delta", w.rpe_delta,
+                 "metres of true path between the poses of a relative pose error pair (default: "
+                 "the source's, 10)")
+      ->check(CLI::PositiveNumber);
 }
 
 // Seed, threads and resampling.

@@ -146,7 +146,7 @@ void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth,
   std::optional<double> map_error;
   if (!loop.source.info().landmarks.empty()) {
     map_error = loop.truth.rmse(now.map, loop.association.engine == engine::Association::kKnown,
-                                loop.options.match_radius);
+                                *loop.options.match_radius);
   }
   loop.trace->row(time, pose_error, map_error, now.map.size(), loop.truth.observed_count());
 }
@@ -391,6 +391,8 @@ int run_simulation(const RunOptions& options) {
       resolve_association(options.association, info, entry.defaults);
   RunOptions resolved = options;
   resolved.filter.association = association.engine;
+  resolved.match_radius = options.match_radius.value_or(info.match_radius);
+  resolved.rpe_delta = options.rpe_delta.value_or(info.rpe_delta);
   const engine::FilterConfig config = filter_config(resolved, info.header);
   const bool ekf = config.algorithm == engine::Algorithm::kEkf;
   const std::uint32_t particles = ekf ? 1 : config.particles;
@@ -404,8 +406,8 @@ int run_simulation(const RunOptions& options) {
     trace = std::make_unique<TraceWriter>(options.trace, options.trace_every);
   }
   RunRecorder recorder(info.header, tracked_point_offset(options, info.header), options.out,
-                       options.rpe_delta);
-  RunLoop loop{options, association, *source, truth, recorder, trace.get(), progress, state};
+                       *resolved.rpe_delta);
+  RunLoop loop{resolved, association, *source, truth, recorder, trace.get(), progress, state};
   if (ekf) {
     engine::EkfSlam filter(config);
     drive(filter, loop, r);
@@ -418,9 +420,9 @@ int run_simulation(const RunOptions& options) {
     std::optional<AlignedAte> alignment;
     if (r.trajectories.filter.truth) alignment = r.trajectories.filter.truth->aligned;
     r.map = truth.scores(r.estimate.map, association.engine == engine::Association::kKnown,
-                         options.match_radius, alignment);
+                         *resolved.match_radius, alignment);
   }
-  const RunSettings settings{options, info, config, association, particles};
+  const RunSettings settings{resolved, info, config, association, particles};
   const nlohmann::json metrics = metrics_json(settings, r);
   print_summary(settings, r);
   if (options.out.empty()) return 0;

@@ -69,9 +69,11 @@ struct RunOptions {
   std::string association = "auto";  // one of kAssociationModes
   // Estimated and true landmarks are paired within this distance (tools/eval/map_evaluation.h)
   // for the unknown-association landmark RMSE, precision and recall; it is also GOSPA's cutoff.
-  double match_radius = 5.0;
-  // Metres of true path between the two poses of a relative-pose-error pair.
-  double rpe_delta = 10.0;
+  // Unset: the source's (SourceInfo::match_radius).
+  std::optional<double> match_radius;
+  // Metres of true path between the two poses of a relative-pose-error pair. Unset: the
+  // source's (SourceInfo::rpe_delta).
+  std::optional<double> rpe_delta;
   ModelOverrides model;
   // Budgets: the run stops after this many controls, or once this much wall time has passed
   // (checked between events), and reports what it has, saying why it ended.

@@ -106,7 +106,7 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
   for (const auto& [key, value] : s.info.metrics) m[key] = value;
   if (s.association.discard_unlabelled) m["unlabelled_discarded"] = r.unlabelled_discarded;
   const RecordedRun& t = r.trajectories;
-  m["rpe_delta_m"] = s.options.rpe_delta;
+  m["rpe_delta_m"] = *s.options.rpe_delta;
   if (t.filter.truth) {
     put_trajectory(m, "pose", *t.filter.truth);
     m["final_position_error_m"] = std::hypot(r.estimate.mean_pose[0] - t.last_truth->x,
@@ -131,7 +131,7 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
     const MapScores& map = *r.map;
     m["landmark_rmse_m"] = map.rmse;
     m["observed_landmarks"] = map.observed;
-    m["match_radius_m"] = s.options.match_radius;
+    m["match_radius_m"] = *s.options.match_radius;
     m["matched_landmarks"] = map.paired.matched;
     m["spurious_landmarks"] = map.paired.spurious;
     m["missing_landmarks"] = map.paired.missing;
@@ -142,7 +142,7 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
     m["gospa_localisation_rms_m"] = localisation_rms(map.gospa);
     m["gospa_missed"] = map.gospa.missed;
     m["gospa_false"] = map.gospa.false_targets;
-    m["gospa_cutoff_m"] = s.options.match_radius;
+    m["gospa_cutoff_m"] = *s.options.match_radius;
     m["gospa_order"] = 2;
     m["ospa_m"] = map.gospa.ospa;
     if (map.gospa_aligned) {
@@ -171,7 +171,7 @@ void print_summary(const RunSettings& s, const RunResult& r) {
               static_cast<unsigned long long>(r.stats.scans), r.estimate.map.size(),
               r.ended_by == "end of data" ? "" : (" (stopped by " + r.ended_by + ")").c_str());
   const RecordedRun& t = r.trajectories;
-  const double delta = s.options.rpe_delta;
+  const double delta = *s.options.rpe_delta;
   if (t.filter.truth) {
     std::printf("  pose error: %s\n", describe(*t.filter.truth, delta).c_str());
     if (t.dead_reckoning.truth) {
@@ -192,9 +192,9 @@ void print_summary(const RunSettings& s, const RunResult& r) {
         "  map: GOSPA %.3f m (cutoff %g m, order 2): %zu assigned at %.3f m RMS, %zu missed, "
         "%zu false; precision %.3f, recall %.3f within %g m; landmark RMSE %.3f m over %zu "
         "matched of %zu observed\n",
-        map.gospa.distance, s.options.match_radius, map.gospa.assigned,
+        map.gospa.distance, *s.options.match_radius, map.gospa.assigned,
         localisation_rms(map.gospa), map.gospa.missed, map.gospa.false_targets, map.precision,
-        map.recall, s.options.match_radius, map.rmse, map.paired.matched, map.observed);
+        map.recall, *s.options.match_radius, map.rmse, map.paired.matched, map.observed);
     if (map.gospa_aligned) {
       std::printf("    with the path's alignment: GOSPA %.3f m: %zu assigned at %.3f m RMS, %zu "
                   "missed, %zu false\n",

@@ -51,7 +51,7 @@ struct RunResult {
 };
 
 struct RunSettings {
-  const RunOptions& options;
+  const RunOptions& options;  // match_radius and rpe_delta resolved (set)
   const SourceInfo& info;
   const engine::FilterConfig& config;
   const AssociationChoice& association;

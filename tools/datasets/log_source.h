@@ -26,6 +26,11 @@ class LogSource final : public Source {
   bool next(Event& event, std::vector<engine::Observation>& scan) override;
   // "FILE:LINE" when the log was read from a file.
   std::string where(std::uint64_t index) const override;
+  // The reader's scoring recommendation (SourceInfo::match_radius, rpe_delta).
+  void recommend_scoring(double match_radius, double rpe_delta) {
+    info_.match_radius = match_radius;
+    info_.rpe_delta = rpe_delta;
+  }
 
  private:
   Log log_;

@@ -68,6 +68,11 @@ class SimSource final : public Source {
     info_.name = o.landmarks_csv.empty() ? o.world : o.landmarks_csv;
     info_.simulated = true;
     info_.labels = clutter && o.config.clutter_rate > 0 ? Labels::kSome : Labels::kAll;
+    // A procedural world's maps are paired within half its landmark spacing.
+    if (!csv_world(o)) {
+      info_.match_radius =
+          0.5 * o.spacing.value_or(o.world == "grid" ? kDefaultGridSpacing : kDefaultLoopSpacing);
+    }
     info_.metrics = {{"clutter_rate", o.config.clutter_rate}, {"scan_period_s", config.dt_observe}};
   }
 

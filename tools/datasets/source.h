@@ -42,11 +42,6 @@ struct FilterDefaults {
   // What --association auto means for this source ("known", "ml", "das" or "mixed"); unset:
   // known when every detection carries an id, ml otherwise.
   std::optional<std::string_view> association;
-  // Scoring: the radius pairing estimated and true landmarks (m) and the travelled distance
-  // of the relative pose error's pairs (m), about the landmark spacing and the scale of the
-  // run.
-  std::optional<double> match_radius;
-  std::optional<double> rpe_delta;
   std::optional<double> existence_range_margin;  // m
   std::optional<double> existence_missed;        // log-odds
   // FastSLAM 2.0 only: the sensor noises, replacing the header's.
@@ -67,6 +62,11 @@ struct SourceInfo {
   bool simulated = false;                // its time is the simulator's, not reading's
   std::vector<std::pair<std::string, double>> metrics;  // added to metrics.json as they are
   std::string summary;                                  // a line `convert` prints; may be empty
+  // Scoring, unless the options say otherwise: the radius pairing estimated and true
+  // landmarks (about half their spacing) and the path length of a relative-pose-error pair
+  // (about the scale of the run), metres.
+  double match_radius = 5.0;
+  double rpe_delta = 10.0;
 };
 
 class Source {

@@ -12,14 +12,10 @@
 namespace fastslam::tools {
 
 // The barcodes identify the landmarks, and a barcode in no row of Barcodes.dat is a misread:
-// mixed association uses the ids and discards the rest. The 15 landmarks stand 0.7-2.1 m from
-// their nearest and a robot drives about 0.1 m/s, so maps are paired within 0.5 m and relative
-// errors taken over 1 m of path.
+// mixed association uses the ids and discards the rest.
 FilterDefaults utias_filter_defaults() {
   FilterDefaults d;
   d.association = "mixed";
-  d.match_radius = 0.5;
-  d.rpe_delta = 1.0;
   return d;
 }
 
@@ -46,7 +42,10 @@ std::unique_ptr<Source> open_utias_source(const SourceOptions& o) {
       {"unlabelled_detections", static_cast<double>(u.unlabelled_detections)},
       {"truth_headings_repaired", static_cast<double>(u.truth_headings_repaired)},
   };
-  return std::make_unique<LogSource>(std::move(u.log), o.data, summary, std::move(metrics));
+  auto source = std::make_unique<LogSource>(std::move(u.log), o.data, summary, std::move(metrics));
+  // The 15 landmarks stand 0.7-2.1 m from their nearest and a robot drives about 0.1 m/s.
+  source->recommend_scoring(0.5, 1.0);
+  return source;
 }
 
 }  // namespace fastslam::tools

@@ -29,15 +29,27 @@ SHARED = os.path.normpath(os.path.join(ROOT, "..", "shared"))
 WEBMAP = ("--landmarks-csv ../shared/data/bailey_sim/example_webmap_landmarks.csv "
           "--waypoints-csv ../shared/data/bailey_sim/example_webmap_waypoints.csv")
 VP = "--source victoria-park --data ../shared/data/victoria_park"
+UTIAS = "--source utias --data ../shared/data/utias_mrclam/dataset1"
 SEEDS = list(range(1, 11))
 
 # Accuracy tables: (table id, title, metric keys shown, note, rows); a row is (label, arguments).
+# A key "a.b" is metrics.json's m["a"]["b"] (dead_reckoning.*: the same controls integrated with
+# no observations, reported beside every run).
 ACCURACY = [
+    ("stress", "The built-in stress run (a 10^5-landmark grid, FastSLAM 1.0, M = 100)",
+     ["pose_rmse_m", "pose_rmse_aligned_m", "dead_reckoning.pose_rmse_m", "gospa_aligned_m"],
+     "`fastslam run` with no option: pose RMSE raw and after the best rigid (SE(2)) fit of the "
+     "path onto the truth; dead reckoning's raw RMSE; the map's GOSPA (cutoff 1 m, half the "
+     "spacing; order 2) after the path's alignment.",
+     [("defaults", "")]),
     ("webmap", "Bailey's webmap (simulated, 35 landmarks, 17382 controls), M = 100",
-     ["pose_rmse_m", "landmark_rmse_m"],
-     "pose RMSE: RMS over every control step of the weighted-mean position against truth; "
-     "landmark RMSE: the most likely particle's map against the truth (known ids: by id; ml/das: "
-     "landmarks paired within --match-radius 5 m, so read it beside the matched count).",
+     ["pose_rmse_m", "pose_rmse_aligned_m", "pose_rpe_translation_rmse_m",
+      "dead_reckoning.pose_rmse_m", "gospa_m", "landmark_rmse_m"],
+     "pose RMSE: RMS over every control step of the weighted-mean position against truth, raw "
+     "and after the best rigid fit; RPE: relative translation error over 10 m of path; dead "
+     "reckoning's raw RMSE; GOSPA (cutoff 5 m, order 2) of the most likely particle's map "
+     "against the observed true landmarks; landmark RMSE: by id (known ids), else over the "
+     "landmarks paired within 5 m.",
      [("FastSLAM 1.0, known ids", f"{WEBMAP} --algorithm fastslam1 --association known"),
       ("FastSLAM 2.0, known ids", f"{WEBMAP} --algorithm fastslam2 --association known"),
       ("FastSLAM 1.0, ML", f"{WEBMAP} --algorithm fastslam1 --association ml"),
@@ -48,9 +60,10 @@ ACCURACY = [
       ("EKF-SLAM, known ids", f"{WEBMAP} --algorithm ekf --association known"),
       ("EKF-SLAM, ML", f"{WEBMAP} --algorithm ekf --association ml")]),
     ("victoria-park", "Victoria Park (real, 61945 controls, 7249 scans, 4466 GPS fixes)",
-     ["gps_rmse_m", "gps_rmse_aligned_m", "landmarks"],
+     ["gps_rmse_m", "gps_rmse_aligned_m", "dead_reckoning.gps_rmse_m", "landmarks"],
      "GPS RMSE over every fix, the estimate interpolated at the fix's time; aligned: after the "
-     "best rigid (SE(2)) fit of the path onto GPS; landmarks: in the most likely particle's map.",
+     "best rigid (SE(2)) fit of the path onto GPS; dead reckoning's GPS RMSE (the odometry "
+     "integrated by the car model); landmarks: in the most likely particle's map.",
      [("FastSLAM 1.0, M = 100, ML (the source's defaults)",
        f"{VP} --algorithm fastslam1 --particles 100 --association ml"),
       ("FastSLAM 1.0, M = 100, ML, no negative information",
@@ -69,14 +82,25 @@ ACCURACY = [
        "--vp-laser-yaw-deg -0.5"),
       ("FastSLAM 1.0, M = 300, ML, curvature walk, laser yaw -0.5 deg",
        f"{VP} --algorithm fastslam1 --particles 300 --association ml --motion none-curvature "
-       "--vp-laser-yaw-deg -0.5"),
-      ("dead reckoning (M = 1, no control noise)",
-       f"{VP} --algorithm fastslam1 --particles 1 --sigma-u0 0 --sigma-u1 0 --association ml "
-       "--no-negative-information")]),
+       "--vp-laser-yaw-deg -0.5")]),
+    ("utias", "UTIAS MRCLAM dataset 1 (real, 5 robots, 75000 controls each, Vicon truth)",
+     ["pose_rmse_m", "pose_rmse_aligned_m", "pose_rpe_translation_rmse_m",
+      "dead_reckoning.pose_rmse_m", "gospa_aligned_m", "landmarks"],
+     "Against Vicon at 10 Hz: pose RMSE raw and after the best rigid fit; RPE over 1 m of path; "
+     "dead reckoning's raw RMSE; the map's GOSPA (cutoff 0.5 m, order 2) after the path's "
+     "alignment; landmarks mapped (15 true). Mixed: the barcodes as landmark ids (the source's "
+     "default); ML: the barcodes ignored.",
+     [(f"robot {r}, FastSLAM 1.0, M = 100, mixed", f"{UTIAS} --robot {r}") for r in range(1, 6)] +
+     [(f"robot {r}, FastSLAM 2.0, M = 100, mixed", f"{UTIAS} --robot {r} --algorithm fastslam2")
+      for r in range(1, 6)] +
+     [(f"robot {r}, FastSLAM 1.0, M = 100, ML", f"{UTIAS} --robot {r} --association ml")
+      for r in range(1, 6)]),
 ]
 
 # The README's short table: (table id, row label, metric key, metric name).
 README_ROWS = [
+    ("stress", "defaults", "pose_rmse_m", "pose RMSE, m"),
+    ("stress", "defaults", "pose_rmse_aligned_m", "aligned pose RMSE, m"),
     ("webmap", "FastSLAM 1.0, known ids", "pose_rmse_m", "pose RMSE, m"),
     ("webmap", "FastSLAM 2.0, known ids", "pose_rmse_m", "pose RMSE, m"),
     ("webmap", "FastSLAM 2.0, ML", "pose_rmse_m", "pose RMSE, m"),
@@ -86,6 +110,12 @@ README_ROWS = [
     ("victoria-park", "FastSLAM 2.0, M = 1, ML", "gps_rmse_m", "GPS RMSE, m"),
     ("victoria-park", "FastSLAM 1.0, M = 300, ML, no odometry, laser yaw -0.5 deg", "gps_rmse_m",
      "GPS RMSE, m"),
+    ("utias", "robot 1, FastSLAM 1.0, M = 100, mixed", "pose_rmse_aligned_m",
+     "aligned pose RMSE, m"),
+    ("utias", "robot 3, FastSLAM 1.0, M = 100, mixed", "pose_rmse_aligned_m",
+     "aligned pose RMSE, m"),
+    ("utias", "robot 1, FastSLAM 1.0, M = 100, ML", "pose_rmse_aligned_m",
+     "aligned pose RMSE, m"),
 ]
 README_BEGIN = "<!-- results.py: begin -->"
 README_END = "<!-- results.py: end -->"
@@ -120,6 +150,15 @@ def machine():
     return f"{model} ({simd}), {os.cpu_count()} cores, {platform.system()} {platform.release()}"
 
 
+def value(metrics, key):
+    """metrics.json's value of `key` ("a.b": m["a"]["b"]), or None."""
+    for part in key.split("."):
+        if not isinstance(metrics, dict) or part not in metrics:
+            return None
+        metrics = metrics[part]
+    return metrics
+
+
 def run_seed(fastslam, args, seed):
     with tempfile.TemporaryDirectory() as out:
         cmd = ([fastslam, "run"] + args.split() +
@@ -137,7 +176,7 @@ def measure_accuracy(fastslam, jobs):
         for label, args in rows:
             with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
                 runs = list(pool.map(lambda s, a=args: run_seed(fastslam, a, s), SEEDS))
-            values = {k: [r.get(k) for r in runs] for k in keys + ["matched_landmarks"]}
+            values = {k: [value(r, k) for r in runs] for k in keys + ["matched_landmarks"]}
             measured.append({"label": label, "args": args, "seeds": SEEDS, "values": values})
             print(f"{table_id}: {label}: done", file=sys.stderr)
         tables[table_id] = measured
@@ -202,12 +241,12 @@ def render(data):
                       "|---|" + "---|" * len(keys)]
             for row in rows:
                 lines.append(f"| {row['label']} | " +
-                             " | ".join(summary(row["values"][k]) for k in keys) + " |")
+                             " | ".join(summary(row["values"].get(k, [])) for k in keys) + " |")
             prefix = os.path.commonprefix([row["args"] for row in rows])
             prefix = prefix[:prefix.rfind(" --") + 1] if " --" in prefix else ""
             lines += ["", f"Command: `fastslam run {prefix.strip()} ARGS --seed S --threads 1` "
                       "for S = 1..10, with ARGS:", ""]
-            lines += [f"- {row['label']}: `{row['args'][len(prefix):]}`" for row in rows]
+            lines += [f"- {row['label']}: `{row['args'][len(prefix):] or '(none)'}`" for row in rows]
             lines.append("")
     speed = data.get("speed")
     if speed:
@@ -234,7 +273,7 @@ def readme_table(data):
         for row in data["accuracy"]["tables"].get(table_id, []):
             if row["label"] == label:
                 lines.append(f"| {titles[table_id]}: {label} | {name} | "
-                             f"{summary(row['values'][key])} |")
+                             f"{summary(row['values'].get(key, []))} |")
     return "\n".join(lines)
 
 

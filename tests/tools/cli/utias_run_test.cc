@@ -13,26 +13,14 @@
 #include <nlohmann/json.hpp>
 
 #include "tests/shared_data.h"
-#include "tests/tools/temp_path.h"
-#include "tools/cli/command_line.h"
+#include "tests/tools/cli/parsed_run.h"
 #include "tools/cli/run_command.h"
 
 namespace fastslam::tools {
 namespace {
 
 nlohmann::json run(const std::string& args, const std::string& name) {
-  const std::string out = testing::temp_path("utias_" + name);
-  CLI::App app;
-  RunOptions o;
-  RunWords w;
-  add_run_options(app, o, w);
-  app.parse(args + " --no-progress --no-plot --out " + out, false);
-  finish_run_options(app, w, o);
-  EXPECT_EQ(run_simulation(o), 0);
-  std::ifstream in(out + "/metrics.json");
-  nlohmann::json metrics = nlohmann::json::parse(in);
-  std::filesystem::remove_all(out);
-  return metrics;
+  return testing::parsed_run(args, "utias_" + name);
 }
 
 TEST(UtiasRun, EveryRobotRunsWithNoOtherFlag) {

@@ -29,7 +29,8 @@ class Summary(unittest.TestCase):
 class Render(unittest.TestCase):
     def fixture(self):
         rows = []
-        for label, args in results.ACCURACY[0][4][:2]:
+        webmap = next(t for t in results.ACCURACY if t[0] == "webmap")
+        for label, args in webmap[4][:2]:
             rows.append({"label": label, "args": args, "seeds": [1, 2],
                          "values": {"pose_rmse_m": [1.0, 3.0], "landmark_rmse_m": [2.0, 2.0],
                                     "matched_landmarks": [None, None]}})
@@ -39,8 +40,9 @@ class Render(unittest.TestCase):
     def test_rows_commands_and_machine(self):
         text = results.render(self.fixture())
         self.assertIn("test machine", text)
-        self.assertIn("| FastSLAM 1.0, known ids | 2.00 / 2.00 / 3.00 | 2.00 / 2.00 / 2.00 |",
-                      text)
+        # Keys a row has no values for show "-".
+        self.assertIn("| FastSLAM 1.0, known ids | 2.00 / 2.00 / 3.00 | - | - | - | - | "
+                      "2.00 / 2.00 / 2.00 |", text)
         self.assertIn("- FastSLAM 2.0, known ids: `--algorithm fastslam2 --association known`",
                       text)
         self.assertIn("example_webmap_waypoints.csv ARGS --seed S", text)
