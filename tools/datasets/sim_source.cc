@@ -73,7 +73,13 @@ class SimSource final : public Source {
       info_.match_radius =
           0.5 * o.spacing.value_or(o.world == "grid" ? kDefaultGridSpacing : kDefaultLoopSpacing);
     }
-    info_.metrics = {{"clutter_rate", o.config.clutter_rate}, {"scan_period_s", config.dt_observe}};
+    // The true noises, beside the dead-reckoning baseline they explain.
+    info_.metrics = {{"clutter_rate", o.config.clutter_rate},
+                     {"scan_period_s", config.dt_observe},
+                     {"sim_sigma_speed", o.config.control_noise ? o.config.sigma_v : 0.0},
+                     {"sim_sigma_steer", o.config.control_noise ? o.config.sigma_steer : 0.0},
+                     {"sim_sigma_range", o.config.sensor_noise ? o.config.sigma_range : 0.0},
+                     {"sim_sigma_bearing", o.config.sensor_noise ? o.config.sigma_bearing : 0.0}};
   }
 
   bool next(Event& e, std::vector<engine::Observation>& scan) override {

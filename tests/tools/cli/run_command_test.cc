@@ -806,6 +806,8 @@ TEST(RunCommand, DeadReckoningIsReportedBesideTheFilter) {
   nlohmann::json m = read_metrics(exact.out);
   ASSERT_TRUE(m.contains("dead_reckoning"));
   EXPECT_LT(m["dead_reckoning"]["pose_rmse_m"].get<double>(), 1e-9);
+  EXPECT_EQ(m["sim_sigma_speed"], 0.0);
+  EXPECT_EQ(m["sim_sigma_steer"], 0.0);
   EXPECT_EQ(line_count(exact.out + "/dead_reckoning.csv"), m["steps"].get<std::size_t>() + 1);
 
   RunOptions noisy = small_loop("dr_noisy");
@@ -815,6 +817,7 @@ TEST(RunCommand, DeadReckoningIsReportedBesideTheFilter) {
   const double dr = m["dead_reckoning"]["pose_rmse_m"].get<double>();
   EXPECT_GT(dr, 3 * m["pose_rmse_m"].get<double>());
   EXPECT_EQ(m["worse_than_dead_reckoning"], false);
+  EXPECT_EQ(m["sim_sigma_speed"], SimConfig{}.sigma_v);
   for (const char* key : {"pose_rmse_aligned_m", "pose_rpe_translation_rmse_m",
                           "pose_rpe_rotation_rmse_deg", "pose_alignment", "gospa_m",
                           "landmark_precision", "landmark_recall"}) {
