@@ -327,6 +327,10 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "simulated false alarms per scan (Poisson mean; ml, das)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
+  cmd.add_option("--detection-probability", o.sim.detection_probability,
+                 "probability that the simulated sensor detects a landmark in view")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
                  "ekf with ml: associate when the squared Mahalanobis distance is below this")
       ->check(CLI::PositiveNumber)

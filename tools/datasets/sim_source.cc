@@ -79,7 +79,8 @@ class SimSource final : public Source {
                      {"sim_sigma_speed", o.config.control_noise ? o.config.sigma_v : 0.0},
                      {"sim_sigma_steer", o.config.control_noise ? o.config.sigma_steer : 0.0},
                      {"sim_sigma_range", o.config.sensor_noise ? o.config.sigma_range : 0.0},
-                     {"sim_sigma_bearing", o.config.sensor_noise ? o.config.sigma_bearing : 0.0}};
+                     {"sim_sigma_bearing", o.config.sensor_noise ? o.config.sigma_bearing : 0.0},
+                     {"detection_probability", o.config.detection_probability}};
   }
 
   bool next(Event& e, std::vector<engine::Observation>& scan) override {

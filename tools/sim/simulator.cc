@@ -19,6 +19,7 @@ double wrap(double angle) {
 constexpr std::uint32_t kControlStream = 0;
 constexpr std::uint32_t kSensorStream = 1;
 constexpr std::uint32_t kClutterStream = 2;
+constexpr std::uint32_t kDetectionStream = 3;
 
 }  // namespace
 
@@ -50,6 +51,9 @@ Simulator::Simulator(const World& world, const SimConfig& config, std::uint64_t 
   aim();
   if (!(config.clutter_rate >= 0) || !(config.clutter_rate <= 1000)) {
     throw std::invalid_argument("simulator: clutter_rate must be in [0, 1000] per scan");
+  }
+  if (!(config.detection_probability >= 0) || !(config.detection_probability <= 1)) {
+    throw std::invalid_argument("simulator: detection_probability must be in [0, 1]");
   }
 }
 
@@ -143,6 +147,8 @@ void Simulator::check_progress(double d2) {
 void Simulator::observe(SimStep& step) {
   index_.within(pose_.x, pose_.y, config_.max_range, visible_);
   parallel::RandomStream noise({seed_, step_, kSensorStream, parallel::Purpose::kSimulator});
+  parallel::RandomStream detect({seed_, step_, kDetectionStream, parallel::Purpose::kSimulator});
+  const bool misses = config_.detection_probability < 1;
   const double half_fov = config_.field_of_view / 2;
   for (const std::uint32_t i : visible_) {
     const Point& landmark = world_->landmarks[i];
@@ -156,6 +162,8 @@ void Simulator::observe(SimStep& step) {
     if (range < config_.min_range) continue;
     const double nr = noise.normal();
     const double nb = noise.normal();
+    // Drawn after the noise, so a miss leaves the other detections as they were.
+    if (misses && !(detect.uniform() < config_.detection_probability)) continue;
     SimObservation z;
     z.landmark = i;
     // Clamped so that a sensor never reports a range below its minimum, whatever the noise.

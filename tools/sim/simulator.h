@@ -44,6 +44,9 @@ struct SimConfig {
   // False alarms: a Poisson number per scan with this mean, uniform over the footprint's area
   // (between min_range and max_range, inside the field of view); their landmark is kClutter.
   double clutter_rate = 0.0;
+  // Each landmark in view is detected with this probability, independently (missed
+  // detections); 1 draws nothing, so runs without misses are unchanged.
+  double detection_probability = 1.0;
 };
 
 struct TruePose {

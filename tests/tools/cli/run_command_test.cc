@@ -365,14 +365,16 @@ TEST(RunCommand, StartHeadingOverrideAndTheAlignedGpsError) {
   ASSERT_EQ(run_simulation(o), 0);
   nlohmann::json m = read_metrics(o.out);
   EXPECT_NEAR(m["gps_rmse_m"].get<double>(), 0.0, 1e-9);
-  EXPECT_NEAR(m["gps_rmse_aligned_m"].get<double>(), 0.0, 1e-9);
+  // The aligned RMSE comes from running co-moments (tools/eval/trajectory_metrics.h): an exact
+  // fit leaves about sqrt(eps) x the path's spread of rounding, not zero.
+  EXPECT_NEAR(m["gps_rmse_aligned_m"].get<double>(), 0.0, 1e-6);
   EXPECT_NEAR(m["initial_heading_deg"].get<double>(), 0.0, 0.0);
   o.initial_heading = std::numbers::pi / 6;  // 30 deg
   ASSERT_EQ(run_simulation(o), 0);
   m = read_metrics(o.out);
   EXPECT_NEAR(m["gps_rmse_m"].get<double>(), std::sqrt(rotated_se / fixes), 1e-9);
   EXPECT_GT(m["gps_rmse_m"].get<double>(), 4.0);
-  EXPECT_NEAR(m["gps_rmse_aligned_m"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(m["gps_rmse_aligned_m"].get<double>(), 0.0, 1e-6);
   EXPECT_NEAR(m["gps_alignment_rotation_deg"].get<double>(), -30.0, 1e-9);
   EXPECT_NEAR(m["initial_heading_deg"].get<double>(), 30.0, 1e-12);
   std::filesystem::remove_all(o.out);

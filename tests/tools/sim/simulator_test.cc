@@ -1,5 +1,6 @@
 #include "tools/sim/simulator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <set>
@@ -165,6 +166,61 @@ TEST(Simulator, RefusesUnusableConfigurations) {
   EXPECT_THROW(Simulator(world, bad, 1), std::invalid_argument);
   World empty;
   EXPECT_THROW(Simulator(empty, SimConfig{}, 1), std::invalid_argument);
+}
+
+// Missed detections: with probability 1 the scans are the default's, bit for bit; with p each
+// landmark in view is seen with probability p (binomial count within 5 sigma), and the ones
+// seen are measured exactly as without misses.
+TEST(Simulator, DetectionProbabilityThinsTheScans) {
+  const World world = square_world();
+  auto run = [&](double p) {
+    SimConfig config;
+    config.detection_probability = p;
+    config.loops = 3;
+    Simulator sim(world, config, 5);
+    std::vector<std::vector<SimObservation>> scans;
+    SimStep step;
+    while (sim.next(step)) {
+      if (step.has_scan) scans.push_back(step.scan);
+    }
+    return scans;
+  };
+  const auto all = run(1.0);
+  SimConfig plain;
+  plain.loops = 3;
+  Simulator sim(world, plain, 5);
+  SimStep step;
+  std::size_t k = 0, total = 0;
+  while (sim.next(step)) {
+    if (!step.has_scan) continue;
+    ASSERT_EQ(step.scan.size(), all[k].size());
+    for (std::size_t j = 0; j < step.scan.size(); ++j) {
+      EXPECT_EQ(step.scan[j].range, all[k][j].range);
+    }
+    total += step.scan.size();
+    ++k;
+  }
+  const double p = 0.6;
+  const auto thinned = run(p);
+  ASSERT_EQ(thinned.size(), all.size());
+  std::size_t seen = 0;
+  for (std::size_t s = 0; s < all.size(); ++s) {
+    seen += thinned[s].size();
+    for (const SimObservation& z : thinned[s]) {
+      const auto same = std::find_if(all[s].begin(), all[s].end(), [&](const SimObservation& a) {
+        return a.landmark == z.landmark;
+      });
+      ASSERT_NE(same, all[s].end());
+      EXPECT_EQ(same->range, z.range);
+      EXPECT_EQ(same->bearing, z.bearing);
+    }
+  }
+  ASSERT_GT(total, 5000u);
+  const double n = static_cast<double>(total);
+  EXPECT_NEAR(static_cast<double>(seen), p * n, 5 * std::sqrt(n * p * (1 - p)));
+  SimConfig bad;
+  bad.detection_probability = 1.5;
+  EXPECT_THROW(Simulator(world, bad, 1), std::invalid_argument);
 }
 
 // A waypoint 3 m to the side of the car, which turns no tighter than 6.9 m (wheelbase 4 m,
