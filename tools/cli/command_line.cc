@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/enum_names.h"
+#include "tools/cli/run_sweep.h"
 
 namespace fastslam::tools {
 namespace {
@@ -173,8 +174,8 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "eq. 64), das (sampling, eq. 65), mixed (the ids given, detections without "
                  "one discarded) or auto (the source's choice, else known when every detection "
                  "has an id and ml otherwise)")
-      ->check(CLI::IsMember(std::vector<std::string>(std::begin(kAssociationModes),
-                                                     std::end(kAssociationModes))))
+      ->check(CLI::IsMember(
+          std::vector<std::string>(std::begin(kAssociationModes), std::end(kAssociationModes))))
       ->capture_default_str();
   add_association_options(cmd, o, w);
   add_execution_options(cmd, o, w);
@@ -279,8 +280,10 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   if (given("--sigma-u0")) o.model.sigma_control0 = w.sigma_control0;
   if (given("--sigma-u1")) o.model.sigma_control1 = w.sigma_control1;
   if (given("--max-range")) o.model.max_range = w.max_range;
-  if (given("--field-of-view-deg")) o.model.field_of_view = w.field_of_view_deg * std::numbers::pi / 180;
+  if (given("--field-of-view-deg"))
+    o.model.field_of_view = w.field_of_view_deg * std::numbers::pi / 180;
   if (given("--max-steps")) o.max_steps = w.max_steps;
+  if (given("--seeds")) o.seeds = parse_seeds(w.seeds);
   if (given("--match-radius")) o.match_radius = w.match_radius;
   if (given("--rpe-delta")) o.rpe_delta = w.rpe_delta;
   if (given("--max-seconds")) o.max_seconds = w.max_seconds;
@@ -357,6 +360,9 @@ void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   engine::FilterConfig& f = o.filter;
   cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
       ->capture_default_str();
+  cmd.add_option("--seeds", w.seeds,
+                 "run once per seed (e.g. 1-10 or 1,3,7-9), each into OUT/seed-S, and "
+                 "summarise the metrics over them in OUT/sweep.json and sweep.csv");
   cmd.add_option("--threads", f.threads, "worker threads (0: all cores)")
       ->check(CLI::Range(0U, 4096U))
       ->capture_default_str();

@@ -33,6 +33,7 @@ struct RunWords {
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
   double max_range = 0, field_of_view_deg = 0;
   std::uint64_t max_steps = 0;
+  std::string seeds;
   double match_radius = 0, rpe_delta = 0;
   double max_seconds = 0;
   double initial_heading_deg = 0;

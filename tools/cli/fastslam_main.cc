@@ -12,6 +12,7 @@
 #include "engine/enum_names.h"
 #include "engine/filter_config.h"
 #include "tools/cli/command_line.h"
+#include "tools/cli/run_sweep.h"
 #include "tools/cli/run_command.h"
 #include "tools/studies/lg_slam_experiment.h"
 #include "tools/studies/scaling_study.h"
@@ -158,7 +159,7 @@ int main(int argc, char** argv) {
     if (run_cmd->parsed()) {
       if (!words.config.empty()) tools::apply_json_config(*run_cmd, words.config);
       tools::finish_run_options(*run_cmd, words, run);
-      return tools::run_simulation(run);
+      return run.seeds.empty() ? tools::run_simulation(run) : tools::run_sweep(run);
     }
     if (convert_cmd->parsed()) {
       if (!convert_words.config.empty())

@@ -168,8 +168,7 @@ void prepare_scan(const RunLoop& loop, std::uint64_t event, double time,
     if (scan[j].id >= 0) continue;
     char when[64];
     std::snprintf(when, sizeof(when), " (scan at t = %.3f s)", time);
-    throw std::runtime_error(loop.source.where(event) + when + ": detection " +
-                             std::to_string(j) +
+    throw std::runtime_error(loop.source.where(event) + when + ": detection " + std::to_string(j) +
                              " has no landmark id ('-'), which known association needs. Run with "
                              "--association auto or ml to associate every detection, or mixed "
                              "to use the ids given and discard the rest");
@@ -365,7 +364,7 @@ AssociationChoice resolve_association(const std::string& mode, const SourceInfo&
                                       const FilterDefaults& defaults) {
   std::string chosen = mode;
   if (mode == "auto") {
-    chosen = defaults.association ? std::string(*defaults.association)
+    chosen = defaults.association          ? std::string(*defaults.association)
              : info.labels == Labels::kAll ? "known"
                                            : "ml";
   }
@@ -381,6 +380,11 @@ AssociationChoice resolve_association(const std::string& mode, const SourceInfo&
 }
 
 int run_simulation(const RunOptions& options) {
+  run_once(options);
+  return 0;
+}
+
+nlohmann::json run_once(const RunOptions& options) {
   RunResult r;
   const auto t_open = Clock::now();
   const SourceEntry& entry = find_source(options.source);
@@ -423,15 +427,15 @@ int run_simulation(const RunOptions& options) {
                          *resolved.match_radius, alignment);
   }
   const RunSettings settings{resolved, info, config, association, particles};
-  const nlohmann::json metrics = metrics_json(settings, r);
+  nlohmann::json metrics = metrics_json(settings, r);
   print_summary(settings, r);
-  if (options.out.empty()) return 0;
+  if (options.out.empty()) return metrics;
   write_run_files(options.out, {.metrics = &metrics,
                                 .streamed = r.trajectories.files,
                                 .map = r.estimate.map,
                                 .true_landmarks = info.landmarks});
   if (!options.plot_script.empty()) draw_map(options.plot_script, options.out);
-  return 0;
+  return metrics;
 }
 
 int convert_to_log(const RunOptions& options) {

@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "engine/filter_config.h"
 #include "tools/datasets/sim_source.h"
 #include "tools/datasets/source.h"
@@ -65,7 +67,7 @@ struct RunOptions {
   std::optional<double> scan_period;
   double loop_length = 2000.0;  // loop
   SimConfig sim;
-  engine::FilterConfig filter;  // its association is set from `association` once resolved
+  engine::FilterConfig filter;       // its association is set from `association` once resolved
   std::string association = "auto";  // one of kAssociationModes
   // Estimated and true landmarks are paired within this distance (tools/eval/map_evaluation.h)
   // for the unknown-association landmark RMSE, precision and recall; it is also GOSPA's cutoff.
@@ -78,6 +80,8 @@ struct RunOptions {
   // Budgets: the run stops after this many controls, or once this much wall time has passed
   // (checked between events), and reports what it has, saying why it ended.
   std::optional<std::uint64_t> max_steps;
+  // --seeds: the run once per seed (tools/cli/run_sweep.h); empty: once, with filter.seed.
+  std::vector<std::uint64_t> seeds;
   std::optional<double> max_seconds;
   // "odometry": the source's motion model with its controls; "none": the controls are ignored
   // (only their dt is used) and the pose follows the Brownian velocity model of eq. 79-81
@@ -139,6 +143,8 @@ engine::MotionKind no_odometry_kind(const std::string& motion);
 // `fastslam run` on any source; returns the process exit code. Throws std::exception with a
 // clear message on bad options or unreadable files.
 int run_simulation(const RunOptions& options);
+// The same, returning the run's metrics.json object.
+nlohmann::json run_once(const RunOptions& options);
 
 // `fastslam convert`: writes any source's events, header and true landmarks (a simulated
 // source passes its false alarms on) as a native log to the file `options.out`, which appears

@@ -92,9 +92,9 @@ RunRecorder::~RunRecorder() = default;
 RunRecorder::PoseFile& RunRecorder::file(std::unique_ptr<PoseFile>& slot, const char* name,
                                          bool position_only) {
   if (!slot) {
-    slot = std::make_unique<PoseFile>(
-        out_dir_ + "/" + name,
-        position_only ? PoseFile::Format::kCsvPosition : PoseFile::Format::kCsv);
+    slot = std::make_unique<PoseFile>(out_dir_ + "/" + name, position_only
+                                                                 ? PoseFile::Format::kCsvPosition
+                                                                 : PoseFile::Format::kCsv);
   }
   return *slot;
 }

@@ -26,9 +26,8 @@ std::int64_t peak_rss_bytes() {
 void put_trajectory(nlohmann::json& m, const std::string& prefix, const TrajectoryMetrics& t) {
   m[prefix + "_rmse_m"] = t.raw.rmse;
   m[prefix + "_rmse_aligned_m"] = t.aligned.rmse;
-  m[prefix + "_alignment"] = {{"rotation_deg", t.aligned.rotation * kDegrees},
-                              {"x_m", t.aligned.x},
-                              {"y_m", t.aligned.y}};
+  m[prefix + "_alignment"] = {
+      {"rotation_deg", t.aligned.rotation * kDegrees}, {"x_m", t.aligned.x}, {"y_m", t.aligned.y}};
   m[prefix + "_rpe_translation_rmse_m"] = t.rpe.translation_rmse;
   if (t.rpe.rotation_rmse) m[prefix + "_rpe_rotation_rmse_deg"] = *t.rpe.rotation_rmse * kDegrees;
   m[prefix + "_rpe_pairs"] = t.rpe.pairs;
@@ -196,11 +195,12 @@ void print_summary(const RunSettings& s, const RunResult& r) {
         localisation_rms(map.gospa), map.gospa.missed, map.gospa.false_targets, map.precision,
         map.recall, *s.options.match_radius, map.rmse, map.paired.matched, map.observed);
     if (map.gospa_aligned) {
-      std::printf("    with the path's alignment: GOSPA %.3f m: %zu assigned at %.3f m RMS, %zu "
-                  "missed, %zu false\n",
-                  map.gospa_aligned->distance, map.gospa_aligned->assigned,
-                  localisation_rms(*map.gospa_aligned), map.gospa_aligned->missed,
-                  map.gospa_aligned->false_targets);
+      std::printf(
+          "    with the path's alignment: GOSPA %.3f m: %zu assigned at %.3f m RMS, %zu "
+          "missed, %zu false\n",
+          map.gospa_aligned->distance, map.gospa_aligned->assigned,
+          localisation_rms(*map.gospa_aligned), map.gospa_aligned->missed,
+          map.gospa_aligned->false_targets);
     }
   }
   if (s.association.discard_unlabelled) {

@@ -26,13 +26,13 @@ namespace fastslam::tools {
 
 // The map against the true landmarks the run observed.
 struct MapScores {
-  MapScore paired;           // greedy pairs within the match radius (the RMSE's)
-  double rmse = 0.0;         // known association: by id; else paired.rmse_m
-  Gospa gospa;               // cutoff = the match radius, order 2, observed landmarks only
+  MapScore paired;    // greedy pairs within the match radius (the RMSE's)
+  double rmse = 0.0;  // known association: by id; else paired.rmse_m
+  Gospa gospa;        // cutoff = the match radius, order 2, observed landmarks only
   // The same after the rigid motion that aligns the path with the truth: the map's shape
   // apart from its placement.
   std::optional<Gospa> gospa_aligned;
-  double precision = 0.0;    // of the optimal matching within the match radius
+  double precision = 0.0;  // of the optimal matching within the match radius
   double recall = 0.0;
   std::size_t observed = 0;  // true landmarks observed
 };
@@ -42,10 +42,10 @@ struct RunResult {
   engine::Estimate estimate;
   engine::FilterStatistics stats;
   RecordedRun trajectories;
-  std::optional<MapScores> map;  // when the source has true landmarks
-  double open_seconds = 0.0;     // opening the source: reading and parsing a recorded one
-  double source_seconds = 0.0;   // its events after that (for a simulator: simulating)
-  double filter_seconds = 0.0;   // the filter, trace rows excluded
+  std::optional<MapScores> map;          // when the source has true landmarks
+  double open_seconds = 0.0;             // opening the source: reading and parsing a recorded one
+  double source_seconds = 0.0;           // its events after that (for a simulator: simulating)
+  double filter_seconds = 0.0;           // the filter, trace rows excluded
   std::string ended_by = "end of data";  // or "--max-steps", "--max-seconds"
   std::uint64_t unlabelled_discarded = 0;
 };

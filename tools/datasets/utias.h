@@ -55,12 +55,12 @@ struct Utias {
   Log log;
   int robot = 0;
   std::size_t odometry_samples = 0;
-  std::size_t truth_rows = 0;           // Vicon rows read
-  std::size_t truth_poses = 0;          // of them, every truth_every-th
+  std::size_t truth_rows = 0;               // Vicon rows read
+  std::size_t truth_poses = 0;              // of them, every truth_every-th
   std::size_t truth_headings_repaired = 0;  // Vicon rows whose heading was a glitch
-  std::size_t measurements = 0;         // rows of RobotN_Measurement.dat
-  std::size_t scans = 0;                // detections grouped by time
-  std::size_t landmark_detections = 0;  // with a landmark's subject as id
+  std::size_t measurements = 0;             // rows of RobotN_Measurement.dat
+  std::size_t scans = 0;                    // detections grouped by time
+  std::size_t landmark_detections = 0;      // with a landmark's subject as id
   std::size_t robot_detections_dropped = 0;
   std::size_t unlabelled_detections = 0;  // passed on (id -1) or dropped, as options say
   std::size_t rounded_measurements = 0;   // at t >= 1000 s: up to 0.05 s off (docs/utias.md)

@@ -122,8 +122,9 @@ void Simulator::aim() {
   // radius, swing the steering from one stop to the other.
   const double swing = 2 * config_.max_steer / std::max(config_.steer_rate, 1e-9);
   aimed_at_ = static_cast<double>(step_) * config_.dt;
-  patience_ = kWaypointPatience *
-              ((distance + 2 * std::numbers::pi * turning_radius_) / config_.speed + swing + config_.dt);
+  patience_ =
+      kWaypointPatience *
+      ((distance + 2 * std::numbers::pi * turning_radius_) / config_.speed + swing + config_.dt);
   closest_ = distance;
 }
 
@@ -133,14 +134,15 @@ void Simulator::check_progress(double d2) {
   if (now - aimed_at_ <= patience_) return;
   const Point& target = world_->waypoints[waypoint_];
   char message[512];
-  std::snprintf(message, sizeof(message),
-                "simulator: waypoint %zu of %zu, at (%.2f, %.2f), not reached after %.1f s of driving "
-                "(%.1f s allowed): the car came no nearer than %.2f m and must come within "
-                "%.2f m. Its tightest turning circle has a radius of %.2f m, so a waypoint that "
-                "near beside its path is circled, never reached. Move the waypoint, or widen "
-                "the radius with --at-waypoint",
-                waypoint_ + 1, world_->waypoints.size(), target.x, target.y, now - aimed_at_, patience_, closest_,
-                config_.at_waypoint, turning_radius_);
+  std::snprintf(
+      message, sizeof(message),
+      "simulator: waypoint %zu of %zu, at (%.2f, %.2f), not reached after %.1f s of driving "
+      "(%.1f s allowed): the car came no nearer than %.2f m and must come within "
+      "%.2f m. Its tightest turning circle has a radius of %.2f m, so a waypoint that "
+      "near beside its path is circled, never reached. Move the waypoint, or widen "
+      "the radius with --at-waypoint",
+      waypoint_ + 1, world_->waypoints.size(), target.x, target.y, now - aimed_at_, patience_,
+      closest_, config_.at_waypoint, turning_radius_);
   throw std::runtime_error(message);
 }
 

@@ -104,10 +104,10 @@ class Simulator {
   TruthIndex index_;
   TruePose pose_;
   double steer_ = 0.0;
-  std::size_t waypoint_ = 0;  // current target
-  double aimed_at_ = 0.0;     // s, when it became the target
-  double patience_ = 0.0;     // s, the time allowed to reach it
-  double closest_ = 0.0;      // m, the nearest the car has come to it
+  std::size_t waypoint_ = 0;     // current target
+  double aimed_at_ = 0.0;        // s, when it became the target
+  double patience_ = 0.0;        // s, the time allowed to reach it
+  double closest_ = 0.0;         // m, the nearest the car has come to it
   double turning_radius_ = 0.0;  // m, at full steering
   int loops_left_;
   bool done_ = false;

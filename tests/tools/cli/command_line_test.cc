@@ -85,6 +85,20 @@ TEST_F(CommandLine, WithoutConfigTheDefaultsStand) {
   EXPECT_EQ(*o.model.sigma_control1, 0.1);
 }
 
+TEST_F(CommandLine, SeedsAndBudgetsAreSetOnlyWhenGiven) {
+  RunOptions o = run("{}", "--seeds 1-3,7 --max-steps 50 --rpe-delta 2");
+  EXPECT_EQ(o.seeds, (std::vector<std::uint64_t>{1, 2, 3, 7}));
+  ASSERT_TRUE(o.max_steps.has_value());
+  EXPECT_EQ(*o.max_steps, 50u);
+  EXPECT_FALSE(o.max_seconds.has_value());
+  ASSERT_TRUE(o.rpe_delta.has_value());
+  EXPECT_EQ(*o.rpe_delta, 2.0);
+  EXPECT_FALSE(o.match_radius.has_value());  // the source's
+  o = run("{}", "");
+  EXPECT_TRUE(o.seeds.empty());
+  EXPECT_FALSE(o.max_steps.has_value());
+}
+
 TEST_F(CommandLine, SpacingAndScanPeriodAreSetOnlyWhenGiven) {
   RunOptions o = run(R"({"spacing": 7.5})", "--scan-period 0.4");
   ASSERT_TRUE(o.spacing.has_value());

@@ -820,9 +820,9 @@ TEST(RunCommand, DeadReckoningIsReportedBesideTheFilter) {
   EXPECT_GT(dr, 3 * m["pose_rmse_m"].get<double>());
   EXPECT_EQ(m["worse_than_dead_reckoning"], false);
   EXPECT_EQ(m["sim_sigma_speed"], SimConfig{}.sigma_v);
-  for (const char* key : {"pose_rmse_aligned_m", "pose_rpe_translation_rmse_m",
-                          "pose_rpe_rotation_rmse_deg", "pose_alignment", "gospa_m",
-                          "landmark_precision", "landmark_recall"}) {
+  for (const char* key :
+       {"pose_rmse_aligned_m", "pose_rpe_translation_rmse_m", "pose_rpe_rotation_rmse_deg",
+        "pose_alignment", "gospa_m", "landmark_precision", "landmark_recall"}) {
     EXPECT_TRUE(m.contains(key)) << key;
   }
   EXPECT_LE(m["pose_rmse_aligned_m"].get<double>(), m["pose_rmse_m"].get<double>());
@@ -854,7 +854,8 @@ TEST(RunCommand, AnUnreachableWaypointFailsFast) {
   o.waypoints_csv = waypoints;
   o.sim.at_waypoint = 0.5;
   const std::string error = error_of(o);
-  EXPECT_NE(error.find("waypoint 2 of 3, at (30.00, 3.00), not reached"), std::string::npos) << error;
+  EXPECT_NE(error.find("waypoint 2 of 3, at (30.00, 3.00), not reached"), std::string::npos)
+      << error;
   std::filesystem::remove(landmarks);
   std::filesystem::remove(waypoints);
   std::filesystem::remove_all(o.out);

@@ -257,7 +257,7 @@ TEST(Simulator, AReachableRouteIsNotStopped) {
   world.landmarks = {{10, 10}};
   Simulator sim(world, SimConfig{}, 1);
   SimStep step;
-  EXPECT_NO_THROW(while (sim.next(step)) {});
+  EXPECT_NO_THROW(while (sim.next(step)){});
 }
 
 TEST(Simulator, RefusesANonPositiveWaypointRadius) {

@@ -1,0 +1,166 @@
+#include "tools/cli/run_sweep.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+namespace fastslam::tools {
+namespace {
+
+std::uint64_t parse_seed(std::string_view text, std::string_view part) {
+  std::uint64_t value = 0;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (text.empty() || ec != std::errc() || end != text.data() + text.size()) {
+    throw std::invalid_argument("--seeds: '" + std::string(part) +
+                                "' is not a seed or a range LO-HI (e.g. 1-10 or 1,3,7-9)");
+  }
+  return value;
+}
+
+// Every number of a metrics object, nested objects' as "outer.inner".
+void flatten(const nlohmann::json& m, const std::string& prefix,
+             std::map<std::string, nlohmann::json>& out) {
+  for (const auto& [key, value] : m.items()) {
+    if (value.is_object()) {
+      flatten(value, prefix + key + ".", out);
+    } else if (value.is_number() || value.is_boolean()) {
+      out[prefix + key] = value;
+    }
+  }
+}
+
+// The errors a sweep's table shows, those the runs have.
+constexpr const char* kHeadline[] = {
+    "pose_rmse_m", "pose_rmse_aligned_m", "dead_reckoning.pose_rmse_m",
+    "gps_rmse_m",  "gps_rmse_aligned_m",  "dead_reckoning.gps_rmse_m",
+    "gospa_m",     "gospa_aligned_m",     "landmark_rmse_m",
+    "landmarks",   "wall_seconds"};
+
+}  // namespace
+
+std::vector<std::uint64_t> parse_seeds(const std::string& text) {
+  std::vector<std::uint64_t> seeds;
+  std::set<std::uint64_t> seen;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    const std::string_view part(text.data() + start, comma - start);
+    const std::size_t dash = part.find('-');
+    const std::uint64_t lo = parse_seed(part.substr(0, dash), part);
+    const std::uint64_t hi =
+        dash == std::string_view::npos ? lo : parse_seed(part.substr(dash + 1), part);
+    if (hi < lo || hi - lo >= 1'000'000) {
+      throw std::invalid_argument("--seeds: '" + std::string(part) +
+                                  "' must be LO-HI with LO <= HI (at most 10^6 seeds)");
+    }
+    for (std::uint64_t s = lo;; ++s) {
+      if (!seen.insert(s).second) {
+        throw std::invalid_argument("--seeds: seed " + std::to_string(s) + " is given twice");
+      }
+      seeds.push_back(s);
+      if (s == hi) break;
+    }
+    start = comma + 1;
+  }
+  return seeds;
+}
+
+nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed) {
+  std::map<std::string, std::vector<double>> numbers;
+  std::map<std::string, std::size_t> trues;
+  for (const nlohmann::json& m : per_seed) {
+    std::map<std::string, nlohmann::json> flat;
+    flatten(m, "", flat);
+    for (const auto& [key, value] : flat) {
+      if (value.is_boolean()) {
+        trues[key] += value.get<bool>();
+      } else {
+        numbers[key].push_back(value.get<double>());
+      }
+    }
+  }
+  nlohmann::json summary = nlohmann::json::object();
+  for (auto& [key, values] : numbers) {
+    std::sort(values.begin(), values.end());
+    const std::size_t n = values.size();
+    double mean = 0.0;
+    for (double v : values) mean += v / static_cast<double>(n);
+    double ss = 0.0;
+    for (double v : values) ss += (v - mean) * (v - mean);
+    const double median = n % 2 == 1 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
+    summary[key] = {{"mean", mean},
+                    {"median", median},
+                    {"min", values.front()},
+                    {"max", values.back()},
+                    {"stdev", n > 1 ? std::sqrt(ss / static_cast<double>(n - 1)) : 0.0},
+                    {"seeds", n}};
+  }
+  for (const auto& [key, count] : trues)
+    summary[key] = {{"true", count}, {"seeds", per_seed.size()}};
+  return summary;
+}
+
+int run_sweep(const RunOptions& options) {
+  const std::vector<std::uint64_t>& seeds = options.seeds;
+  if (seeds.empty()) throw std::invalid_argument("--seeds: no seed given");
+  std::vector<nlohmann::json> per_seed;
+  for (const std::uint64_t seed : seeds) {
+    RunOptions o = options;
+    o.filter.seed = seed;
+    if (!options.out.empty()) o.out = options.out + "/seed-" + std::to_string(seed);
+    std::printf("== seed %llu\n", static_cast<unsigned long long>(seed));
+    std::fflush(stdout);
+    per_seed.push_back(run_once(o));
+    per_seed.back()["seed"] = seed;
+  }
+  const nlohmann::json summary = summarise_seeds(per_seed);
+  std::printf("== %zu seeds: mean / median / worst (max) / stdev\n", seeds.size());
+  for (const char* key : kHeadline) {
+    if (!summary.contains(key)) continue;
+    const nlohmann::json& s = summary[key];
+    std::printf("  %-28s %10.3f / %10.3f / %10.3f / %8.3f\n", key, s["mean"].get<double>(),
+                s["median"].get<double>(), s["max"].get<double>(), s["stdev"].get<double>());
+  }
+  if (options.out.empty()) return 0;
+  std::filesystem::create_directories(options.out);
+  {
+    std::ofstream json(options.out + "/sweep.json");
+    json << nlohmann::json{{"seeds", seeds}, {"summary", summary}, {"per_seed", per_seed}}.dump(2)
+         << '\n';
+    if (!json) throw std::runtime_error("cannot write " + options.out + "/sweep.json");
+  }
+  std::set<std::string> columns;
+  std::vector<std::map<std::string, nlohmann::json>> rows(per_seed.size());
+  for (std::size_t i = 0; i < per_seed.size(); ++i) {
+    flatten(per_seed[i], "", rows[i]);
+    for (const auto& [key, value] : rows[i]) columns.insert(key);
+  }
+  std::ofstream csv(options.out + "/sweep.csv");
+  bool first = true;
+  for (const std::string& c : columns) csv << (first ? "" : ",") << c, first = false;
+  csv << '\n';
+  for (const auto& row : rows) {
+    first = true;
+    for (const std::string& c : columns) {
+      csv << (first ? "" : ",");
+      first = false;
+      const auto found = row.find(c);
+      if (found != row.end()) csv << found->second.dump();
+    }
+    csv << '\n';
+  }
+  csv.close();
+  if (!csv) throw std::runtime_error("cannot write " + options.out + "/sweep.csv");
+  std::printf("  wrote %s/{sweep.json,sweep.csv,seed-*/}\n", options.out.c_str());
+  return 0;
+}
+
+}  // namespace fastslam::tools

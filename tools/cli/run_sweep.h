@@ -1,0 +1,33 @@
+// `fastslam run --seeds LIST`: one case over many seeds, because a single seed hides failures.
+// Each seed runs as `fastslam run` would (into OUT/seed-S when there is an output directory),
+// then every numeric metric is summarised over the seeds (mean, median, min, max, standard
+// deviation; booleans as the number of seeds where true) into OUT/sweep.json, with every seed's
+// metrics, and OUT/sweep.csv (a row per seed); a table of the headline errors goes to stdout.
+//
+// Ownership: plain options in; files out. Thread safety: one sweep per call; seeds run one
+// after another, each with the options' threads (results do not depend on the thread count).
+// Costs: the runs', plus O(seeds x metrics).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "tools/cli/run_command.h"
+
+namespace fastslam::tools {
+
+// "1-10", "3", "1,4,7-9" into seeds in the order given. Throws std::invalid_argument naming the
+// part that is not a seed or a range lo-hi with lo <= hi, or a seed given twice.
+std::vector<std::uint64_t> parse_seeds(const std::string& text);
+
+// The summary of metrics.json objects, one per seed: {key: {mean, median, min, max, stdev}}
+// for every number (nested objects as "outer.inner"), {key: {true: count}} for booleans.
+nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed);
+
+// Runs `options` once per seed of options.seeds; returns the process exit code.
+int run_sweep(const RunOptions& options);
+
+}  // namespace fastslam::tools
