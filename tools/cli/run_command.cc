@@ -27,6 +27,7 @@
 #include "tools/cli/run_report.h"
 #include "tools/eval/map_evaluation.h"
 #include "tools/eval/map_metrics.h"
+#include "tools/eval/particle_diagnostics.h"
 #include "tools/eval/trajectory_errors.h"
 #include "tools/io/log_format.h"
 #include "tools/io/tum.h"
@@ -139,16 +140,21 @@ void observe_state(F& filter, ProgressState& state) {
 template <class F>
 void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth, double time) {
   const engine::Estimate now = filter.estimate();
+  if (truth && time - truth->time > kMaxInterpolationGap) truth.reset();
   std::optional<double> pose_error;
-  if (truth && time - truth->time <= kMaxInterpolationGap) {
-    pose_error = std::hypot(now.mean_pose[0] - truth->x, now.mean_pose[1] - truth->y);
+  if (truth) pose_error = std::hypot(now.mean_pose[0] - truth->x, now.mean_pose[1] - truth->y);
+  std::optional<ParticleDiagnostics> particles;
+  if constexpr (requires { filter.particles(); }) {
+    const memory::ParticleStore& store = filter.particles();
+    particles = diagnose_particles(store.x(), store.y(), store.log_weight(), truth);
   }
   std::optional<double> map_error;
   if (!loop.source.info().landmarks.empty()) {
     map_error = loop.truth.rmse(now.map, loop.association.engine == engine::Association::kKnown,
                                 *loop.options.match_radius);
   }
-  loop.trace->row(time, pose_error, map_error, now.map.size(), loop.truth.observed_count());
+  loop.trace->row(time, pose_error, map_error, now.map.size(), loop.truth.observed_count(),
+                  particles);
 }
 
 // The scan as the filter takes it: under mixed association without its unlabelled detections

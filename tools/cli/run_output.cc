@@ -39,19 +39,33 @@ void write_true_landmarks_csv(std::ofstream& file, std::span<const TruthLandmark
 TraceWriter::TraceWriter(const std::string& path, std::uint64_t every)
     : path_(path), every_(every == 0 ? 1 : every), file_(path) {
   if (!file_) throw std::runtime_error("--trace " + path + ": cannot open for writing");
-  file_ << "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks\n";
+  file_ << "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks,n_eff,"
+           "distinct_particles,particle_spread_m,truth_spreads,nearest_weight\n";
 }
 
 void TraceWriter::row(double t, std::optional<double> pose_error, std::optional<double> map_error,
-                      std::size_t landmarks, std::size_t observed) {
-  char line[200];
+                      std::size_t landmarks, std::size_t observed,
+                      const std::optional<ParticleDiagnostics>& particles) {
+  char line[400];
   int n = std::snprintf(line, sizeof(line), "%.3f,%llu,", t,
                         static_cast<unsigned long long>(scans_ - 1));
   n += pose_error ? std::snprintf(line + n, sizeof(line) - n, "%.6f,", *pose_error)
                   : std::snprintf(line + n, sizeof(line) - n, ",");
   n += map_error ? std::snprintf(line + n, sizeof(line) - n, "%.6f,", *map_error)
                  : std::snprintf(line + n, sizeof(line) - n, ",");
-  std::snprintf(line + n, sizeof(line) - n, "%zu,%zu\n", landmarks, observed);
+  n += std::snprintf(line + n, sizeof(line) - n, "%zu,%zu,", landmarks, observed);
+  if (particles) {
+    const ParticleDiagnostics& d = *particles;
+    n += std::snprintf(line + n, sizeof(line) - n, "%.3f,%zu,%.6f,", d.effective_sample_size,
+                       d.distinct, d.spread);
+    n += d.truth_spreads ? std::snprintf(line + n, sizeof(line) - n, "%.3f,", *d.truth_spreads)
+                         : std::snprintf(line + n, sizeof(line) - n, ",");
+    n +=
+        d.nearest_weight ? std::snprintf(line + n, sizeof(line) - n, "%.6f", *d.nearest_weight) : 0;
+  } else {
+    n += std::snprintf(line + n, sizeof(line) - n, ",,,,");
+  }
+  std::snprintf(line + n, sizeof(line) - n, "\n");
   file_ << line;
 }
 

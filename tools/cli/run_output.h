@@ -17,12 +17,15 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "engine/filter.h"
+#include "tools/eval/particle_diagnostics.h"
 #include "tools/io/log_format.h"
 
 namespace fastslam::tools {
 
 // `--trace`: one row every `every` scans, "t,scan,pose_error_m,landmark_rmse_m,landmarks,
-// observed_landmarks", an absent error left empty.
+// observed_landmarks,n_eff,distinct_particles,particle_spread_m,truth_spreads,nearest_weight"
+// (the particle set's diagnostics, tools/eval/particle_diagnostics.h), an absent value left
+// empty.
 class TraceWriter {
  public:
   // Throws std::runtime_error "--trace PATH: cannot open for writing".
@@ -30,7 +33,8 @@ class TraceWriter {
   // Counts a scan; true when this one gets a row.
   bool due() { return scans_++ % every_ == 0; }
   void row(double t, std::optional<double> pose_error, std::optional<double> map_error,
-           std::size_t landmarks, std::size_t observed);
+           std::size_t landmarks, std::size_t observed,
+           const std::optional<ParticleDiagnostics>& particles);
   // Throws std::runtime_error when the file could not be written.
   void close();
 

@@ -583,7 +583,9 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     }
     std::string header;
     const auto rows = csv_rows(traced.trace, &header);
-    EXPECT_EQ(header, "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks");
+    EXPECT_EQ(header,
+              "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks,n_eff,"
+              "distinct_particles,particle_spread_m,truth_spreads,nearest_weight");
     ASSERT_EQ(rows.size(), m["scans"].get<std::size_t>());
     // Oracle for the pose error: the written trajectory and truth at the row's time.
     std::unordered_map<std::string, std::pair<double, double>> estimate, truth;
@@ -596,7 +598,21 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     std::size_t observed = 0;
     for (std::size_t i = 0; i < rows.size(); ++i) {
       const auto& r = rows[i];
-      ASSERT_EQ(r.size(), 6u) << i;
+      ASSERT_EQ(r.size(), 11u) << i;
+      // The particle set's diagnostics: N_eff and the survivors within 1..M; one particle is
+      // its own mean and the nearest, at the average weight.
+      const double m_particles = static_cast<double>(c.particles);
+      EXPECT_GT(std::stod(r[6]), 0.999) << i;
+      EXPECT_LE(std::stod(r[6]), m_particles + 1e-6) << i;
+      EXPECT_GE(std::stoul(r[7]), 1u) << i;
+      EXPECT_LE(std::stoul(r[7]), c.particles) << i;
+      EXPECT_GE(std::stod(r[8]), 0.0) << i;
+      EXPECT_GT(std::stod(r[10]), 0.0) << i;
+      if (pose_oracle) {
+        EXPECT_EQ(std::stod(r[8]), 0.0) << i;
+        EXPECT_EQ(r[9], "") << i;
+        EXPECT_EQ(std::stod(r[10]), 1.0) << i;
+      }
       EXPECT_EQ(std::stoul(r[1]), i);
       ASSERT_TRUE(estimate.contains(r[0]) && truth.contains(r[0])) << r[0];
       const auto [ex, ey] = estimate[r[0]];
