@@ -392,7 +392,8 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "directory for metrics.json, trajectory.csv/.tum, landmarks.csv and the truth");
   cmd.add_option("--trace", o.trace,
                  "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
-                 "landmark RMSE of the seen landmarks, landmarks in the map)");
+                 "landmark RMSE of the seen landmarks, landmarks in the map, the particle set's "
+                 "N_eff, distinct survivors, spread and the truth's distance in spreads)");
   cmd.add_option("--max-steps", w.max_steps,
                  "stop after this many controls and report what the run has (default: none)")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 62));
