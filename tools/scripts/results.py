@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """Measures the tables of docs/results.md and writes it.
 
-Every row is a command: accuracy rows run `fastslam run` over seeds (mean, median, worst of the
-metric, never one seed); speed rows run a Google Benchmark binary with repetitions and keep the
+Every row is a command: accuracy rows run `fastslam run ARGS --seeds 1-10` (the sweep of
+tools/cli/run_sweep.h; mean, median, worst of the metric, never one seed); speed rows run a Google Benchmark binary with repetitions and keep the
 median. Raw measurements (per seed, per repetition, with the machine and the date) are kept in
 docs/results.json, so re-measuring one section leaves the others as they were measured:
 
@@ -159,23 +159,29 @@ def value(metrics, key):
     return metrics
 
 
-def run_seed(fastslam, args, seed):
+def run_seeds(fastslam, args, seeds):
+    """`fastslam run ARGS --seeds LIST`: the per-seed metrics from its sweep.json."""
+    listed = ",".join(str(s) for s in seeds)
     with tempfile.TemporaryDirectory() as out:
         cmd = ([fastslam, "run"] + args.split() +
-               ["--seed", str(seed), "--threads", "1", "--no-progress", "--no-plot", "--out", out])
+               ["--seeds", listed, "--threads", "1", "--no-progress", "--no-plot", "--out", out])
         subprocess.run(cmd, cwd=ROOT, check=True, stdout=subprocess.DEVNULL,
                        stderr=subprocess.PIPE)
-        with open(os.path.join(out, "metrics.json")) as f:
-            return json.load(f)
+        with open(os.path.join(out, "sweep.json")) as f:
+            return json.load(f)["per_seed"]
 
 
 def measure_accuracy(fastslam, jobs):
+    """Each row is one `--seeds` sweep, its seeds split into `jobs` sweeps run at once."""
     tables = {}
     for table_id, _, keys, _, rows in ACCURACY:
         measured = []
+        chunks = [SEEDS[i::jobs] for i in range(jobs) if SEEDS[i::jobs]]
         for label, args in rows:
-            with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
-                runs = list(pool.map(lambda s, a=args: run_seed(fastslam, a, s), SEEDS))
+            with concurrent.futures.ThreadPoolExecutor(len(chunks)) as pool:
+                parts = list(pool.map(lambda c, a=args: run_seeds(fastslam, a, c), chunks))
+            by_seed = {m["seed"]: m for part in parts for m in part}
+            runs = [by_seed[s] for s in SEEDS]
             values = {k: [value(r, k) for r in runs] for k in keys + ["matched_landmarks"]}
             measured.append({"label": label, "args": args, "seeds": SEEDS, "values": values})
             print(f"{table_id}: {label}: done", file=sys.stderr)
@@ -230,7 +236,7 @@ def render(data):
     acc = data.get("accuracy")
     if acc:
         lines += ["## Accuracy", "", f"Measured {acc['date']} on {acc['machine']} with "
-                  f"`fastslam run ARGS --seed S --threads 1` (results do not depend on the "
+                  f"`fastslam run ARGS --seeds 1-10 --threads 1` (results do not depend on the "
                   f"thread count).", ""]
         for table_id, title, keys, note, _ in ACCURACY:
             rows = acc["tables"].get(table_id)
@@ -244,8 +250,9 @@ def render(data):
                              " | ".join(summary(row["values"].get(k, [])) for k in keys) + " |")
             prefix = os.path.commonprefix([row["args"] for row in rows])
             prefix = prefix[:prefix.rfind(" --") + 1] if " --" in prefix else ""
-            lines += ["", f"Command: `fastslam run {prefix.strip()} ARGS --seed S --threads 1` "
-                      "for S = 1..10, with ARGS:", ""]
+            lines += ["", f"Command: `fastslam run {prefix.strip()} ARGS --seeds 1-10 --threads 1` "
+                      "(per seed: `OUT/seed-S/metrics.json`; summary: `OUT/sweep.json`), with ARGS:",
+                      ""]
             lines += [f"- {row['label']}: `{row['args'][len(prefix):] or '(none)'}`" for row in rows]
             lines.append("")
     speed = data.get("speed")

@@ -45,7 +45,7 @@ class Render(unittest.TestCase):
                       "2.00 / 2.00 / 2.00 |", text)
         self.assertIn("- FastSLAM 2.0, known ids: `--algorithm fastslam2 --association known`",
                       text)
-        self.assertIn("example_webmap_waypoints.csv ARGS --seed S", text)
+        self.assertIn("example_webmap_waypoints.csv ARGS --seeds 1-10", text)
         self.assertNotIn("### Victoria Park", text)  # tables without measurements are left out
 
     def test_readme_table(self):
