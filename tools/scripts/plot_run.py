@@ -22,16 +22,35 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Ellipse, Rectangle  # noqa: E402
 
 
-def read(path):
+def read(path, limit=None):
+    """The rows of a CSV file as dicts of floats; with `limit`, about that many, evenly spaced
+    (a path of 10^7 poses is read without holding it: one pass counts, one keeps)."""
     if not os.path.exists(path):
         return []
+    step = 1
+    if limit:
+        with open(path) as f:
+            step = max(1, (sum(1 for _ in f) - 1) // limit)
     with open(path, newline="") as f:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+        return [{k: float(v) for k, v in row.items()}
+                for i, row in enumerate(csv.DictReader(f)) if i % step == 0]
 
 
-def thin(rows, limit=20000):
-    step = max(1, len(rows) // limit)
-    return rows[::step]
+def read_near(path, box, margin):
+    """The rows of a path file near the box, at full resolution, with a break (NaN) where the
+    path leaves and comes back; streamed."""
+    x0, x1, y0, y1 = box
+    out = []
+    if not os.path.exists(path):
+        return out
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            x, y = float(row["x"]), float(row["y"])
+            if x0 - margin <= x <= x1 + margin and y0 - margin <= y <= y1 + margin:
+                out.append({"x": x, "y": y})
+            elif out and not math.isnan(out[-1]["x"]):
+                out.append({"x": float("nan"), "y": float("nan")})
+    return out
 
 
 def ellipse(ax, r, **style):
@@ -99,18 +118,6 @@ def inside(rows, box):
     return [r for r in rows if x0 <= r["x"] <= x1 and y0 <= r["y"] <= y1]
 
 
-def path_inside(rows, box, margin):
-    """The rows of a path near the box, with a break (NaN) where it leaves and comes back."""
-    x0, x1, y0, y1 = box
-    out = []
-    for r in rows:
-        if x0 - margin <= r["x"] <= x1 + margin and y0 - margin <= r["y"] <= y1 + margin:
-            out.append(r)
-        elif out and not math.isnan(out[-1]["x"]):
-            out.append({"x": float("nan"), "y": float("nan")})
-    return out
-
-
 def zoom_box(true_lm, truth, count=150):
     """(x0, x1, y0, y1): a square holding about `count` true landmarks at their mean density,
     centred on the true pose nearest the landmarks' centroid."""
@@ -127,10 +134,8 @@ def main():
     if len(sys.argv) != 2:
         sys.exit(__doc__)
     out = sys.argv[1]
-    truth_all = read(os.path.join(out, "truth.csv"))
-    est_all = read(os.path.join(out, "trajectory.csv"))
-    truth = thin(truth_all)
-    est = thin(est_all)
+    truth = read(os.path.join(out, "truth.csv"), limit=20000)
+    est = read(os.path.join(out, "trajectory.csv"), limit=20000)
     gps = read(os.path.join(out, "gps.csv"))
     true_lm = read(os.path.join(out, "true_landmarks.csv"))
     lm = read(os.path.join(out, "landmarks.csv"))
@@ -139,12 +144,12 @@ def main():
         with open(os.path.join(out, "metrics.json")) as f:
             metrics = json.load(f)
 
-    dead_reckoning = thin(read(os.path.join(out, "dead_reckoning.csv")))
+    dead_reckoning = read(os.path.join(out, "dead_reckoning.csv"), limit=20000)
     alignment = metrics.get("pose_alignment") or metrics.get("gps_alignment")
     est_aligned = aligned(est, alignment) if alignment else []
 
     small = len(lm) <= 2000 and len(true_lm) <= 2000
-    zoom = not small and truth_all and true_lm
+    zoom = not small and truth and true_lm
     if zoom:
         fig, (ax, zx) = plt.subplots(1, 2, figsize=(16, 8.4), dpi=110,
                                      gridspec_kw={"width_ratios": [1, 1]})
@@ -154,7 +159,7 @@ def main():
          dead_reckoning=dead_reckoning, est_aligned=est_aligned)
 
     if zoom:
-        box = zoom_box(true_lm, truth_all)
+        box = zoom_box(true_lm, truth)
         half = (box[1] - box[0]) / 2
         near_lm = inside(lm, box)
         if metrics.get("association") == "known":
@@ -164,7 +169,8 @@ def main():
                 t = by_id.get(int(r["id"]))
                 if t is not None:
                     zx.plot([r["x"], t["x"]], [r["y"], t["y"]], color="tab:orange", lw=0.7)
-        draw(zx, path_inside(truth_all, box, half), path_inside(est_all, box, half), [],
+        draw(zx, read_near(os.path.join(out, "truth.csv"), box, half),
+             read_near(os.path.join(out, "trajectory.csv"), box, half), [],
              inside(true_lm, box), near_lm, True, ellipses=True)
         zx.set_xlim(box[0], box[1])
         zx.set_ylim(box[2], box[3])
