@@ -190,6 +190,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
   std::vector<engine::Observation> scan;
   const Clock::time_point start = Clock::now();
   std::optional<StampedPose> last_truth;
+  std::uint64_t controls = 0;
   for (std::uint64_t index = 0;; ++index) {
     const auto t0 = Clock::now();
     if (loop.options.max_seconds &&
@@ -203,11 +204,12 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     try {
       switch (event.kind) {
         case EventKind::kControl:
-          if (loop.options.max_steps && filter.statistics().controls >= *loop.options.max_steps) {
+          if (loop.options.max_steps && controls == *loop.options.max_steps) {
             r.ended_by = "--max-steps";
             break;
           }
           filter.predict(event.control, event.dt);
+          ++controls;
           loop.recorder.control(event);
           break;
         case EventKind::kScan:
