@@ -38,6 +38,7 @@ struct AssociationCandidate {
   memory::Slot slot = 0;
   double log_likelihood = 0.0;
   std::uint32_t tag = 0;  // the caller's (e.g. where it keeps this pair's terms); carried along
+  float mahalanobis2 = 0.0f;  // the pair's squared distance, for reports; carried along
 };
 
 // `assignment` value of an observation that starts a new landmark.

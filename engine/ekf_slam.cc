@@ -531,6 +531,9 @@ Estimate EkfSlam::estimate() const {
   const Impl& s = *impl_;
   Estimate e;
   for (int k = 0; k < s.d; ++k) e.mean_pose[k] = e.best_pose[k] = s.x[k];
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) e.pose_covariance[3 * r + c] = s.p(std::max(r, c), std::min(r, c));
+  }
   e.best_particle = 0;
   e.effective_sample_size = 1.0;
   e.map.reserve(s.landmarks());

@@ -48,7 +48,8 @@ class EkfSlam {
   // bad observation.
   void observe(std::span<const Observation> scan);
 
-  // mean_pose = best_pose = the EKF mean; best_particle 0, effective_sample_size 1; the map in
+  // mean_pose = best_pose = the EKF mean, pose_covariance its pose block; best_particle 0,
+  // effective_sample_size 1; time 0 and no associations (yet); the map in
   // landmark order (slot = index) with the 2x2 marginal covariances, id = the observations' id
   // in known mode and the landmark's index under ML, log_odds 0.
   Estimate estimate() const;

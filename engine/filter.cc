@@ -6,11 +6,13 @@
 #include "engine/filter.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
 #include <string>
 
+#include "engine/angles.h"
 #include "engine/internal/filter_state.h"
 #include "engine/internal/map_update.h"
 #include "engine/internal/pass.h"
@@ -65,6 +67,23 @@ void Filter::predict(const Control& control, double dt) {
   s.pending.push_back({control.u0, control.u1, dt, s.counters.step});
   ++s.counters.step;
   ++s.counters.controls;
+  s.time += dt;
+}
+
+void Filter::predict(const Control& control, double dt, double time) {
+  internal::FilterState& s = impl_->state;
+  internal::check_time(time, s.time, s.timed);
+  predict(control, dt);
+  s.time = time;
+  s.timed = true;
+}
+
+void Filter::observe(std::span<const Observation> scan, double time) {
+  internal::FilterState& s = impl_->state;
+  internal::check_time(time, s.time, s.timed);
+  observe(scan);
+  s.time = time;
+  s.timed = true;
 }
 
 void Filter::observe(std::span<const Observation> scan) {
@@ -81,7 +100,10 @@ void Filter::observe(std::span<const Observation> scan) {
   using Clock = std::chrono::steady_clock;
   const Clock::time_point t0 = Clock::now();
   const std::uint64_t scan_step = s.counters.step;
+  s.records.reset(s.store.size(), plan.observations.size());
   impl.pass->observe(plan.observations, scan_step);
+  s.associations = internal::report_scan(s.store, s.records, plan.observations,
+                                         s.config.association == Association::kKnown, scan_step);
   s.known_slots.merge(plan.new_slots);
   ++s.counters.step;
   ++s.counters.scans;
@@ -150,6 +172,34 @@ Estimate Filter::estimate() {
   e.mean_pose[3] = sums.v / sums.w;
   e.mean_pose[4] = sums.omega / sums.w;
   e.effective_sample_size = sums.w * sums.w / sums.w2;
+  // The covariance about the mean, a second pass (no cancellation of large sums).
+  using Moments = std::array<double, 6>;  // xx, xy, xt, yy, yt, tt
+  const Moments mo = impl_->kernel.reduce(
+      m, Moments{},
+      [&](std::size_t begin, std::size_t end) {
+        Moments part{};
+        for (std::size_t i = begin; i < end; ++i) {
+          const double w = std::exp(lw[i] - max_lw);
+          const double d[3] = {store.x()[i] - e.mean_pose[0], store.y()[i] - e.mean_pose[1],
+                               wrap_angle(store.theta()[i] - e.mean_pose[2])};
+          for (int r = 0, k = 0; r < 3; ++r) {
+            for (int c = r; c < 3; ++c, ++k) part[k] += w * d[r] * d[c];
+          }
+        }
+        return part;
+      },
+      [](const Moments& a, const Moments& b) {
+        Moments sum;
+        for (std::size_t k = 0; k < sum.size(); ++k) sum[k] = a[k] + b[k];
+        return sum;
+      });
+  for (int r = 0, k = 0; r < 3; ++r) {
+    for (int c = r; c < 3; ++c, ++k) {
+      e.pose_covariance[3 * r + c] = e.pose_covariance[3 * c + r] = mo[k] / sums.w;
+    }
+  }
+  e.time = impl_->state.time;
+  e.associations = impl_->state.associations;
   e.best_particle = static_cast<std::uint32_t>(best);
   const double best_pose[5] = {store.x()[best], store.y()[best], store.theta()[best],
                                store.v()[best], store.omega()[best]};

@@ -1,7 +1,8 @@
 // The FastSLAM 1.0 / 2.0 filter that embedders call (paper sections 4-5): M particles, each with
-// its own persistent map. Feed it `predict(control, dt)` for every odometry sample and
-// `observe(scan)` for every scan, in time order; read `estimate()` and `statistics()` whenever
-// you like; `save` and `load` the whole state (a restored filter continues bit-identically).
+// its own persistent map. Feed it `predict(control, dt, time)` for every odometry sample and
+// `observe(scan, time)` for every scan, in time order (the time is optional); read `estimate()`
+// (poses, covariance, the last scan's associations, the map) and `statistics()` whenever you
+// like; `save` and `load` the whole state (a restored filter continues bit-identically).
 // Results are bit-identical for any thread count and grain. Bad input (non-finite values, a
 // range <= 0, dt < 0, a missing or repeated id with known ids) throws std::invalid_argument and
 // leaves the filter as it was. Owns its particles, maps, node heap and threads (a TBB arena of
@@ -40,7 +41,10 @@ struct Observation {
   std::int64_t id = -1;
 };
 
-// A landmark of the best particle's map.
+// A landmark of one particle's map, in that particle's world frame: its mean and covariance are
+// conditioned on that particle's path, so they agree with its pose (Estimate::best_pose), not
+// exactly with the weighted mean pose. `log_odds` is its existence (eq. 73-75; unknown
+// association: below ExistenceConfig::remove_below it is removed).
 struct MapLandmark {
   memory::Slot slot = 0;
   std::uint64_t id = 0;
@@ -50,14 +54,48 @@ struct MapLandmark {
   std::int64_t last_seen = 0;
 };
 
+// What became of one observation of a scan in one particle (ObservationAssociation).
+enum class AssociationOutcome : std::uint8_t {
+  kAssociated,   // updated an existing landmark
+  kNew,         // started a landmark
+  // Left out of the map: EkfSlam's observations between its two gates (EkfConfig). FastSLAM
+  // never discards one: an observation no landmark explains better than p0 starts a landmark.
+  kDiscarded,
+};
+
+// One observation of the last scan, as the most likely particle took it.
+struct ObservationAssociation {
+  std::uint32_t observation = 0;  // index in the scan
+  AssociationOutcome outcome = AssociationOutcome::kAssociated;
+  // The landmark it updated or started (its MapLandmark::id); 0 when discarded.
+  std::uint64_t landmark_id = 0;
+  // Squared Mahalanobis distance v^T Q^-1 v to that landmark, as the association weighed it
+  // (FastSLAM 2.0, unknown association: with the pose integrated out, eq. 60; known ids: at the
+  // particle's drawn pose). For a new or discarded observation: to the nearest gated candidate
+  // it did not take (mutual exclusion gave that one to another observation), +inf when none.
+  double mahalanobis2 = 0.0;
+};
+
 struct Estimate {
+  // The time of the latest data (predict / observe), in the caller's seconds: the last time
+  // given, advanced by the dt of every untimed predict since; 0 until a time is given.
+  double time = 0.0;
   // Weighted mean of the particles' poses (heading by circular mean); v, omega for kBrownian,
   // v, kappa for kBrownianCurvature.
   double mean_pose[5] = {0, 0, 0, 0, 0};
+  // Weighted covariance of the particles' (x, y, theta) about mean_pose, row-major; heading
+  // differences are wrapped to (-pi, pi]. Zero for a filter whose particles all coincide.
+  double pose_covariance[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
   // The pose of the particle of highest weight (lowest index on ties).
   double best_pose[5] = {0, 0, 0, 0, 0};
   std::uint32_t best_particle = 0;
   double effective_sample_size = 0.0;
+  // The last scan's observations in scan order, for the particle of highest weight after that
+  // scan's weighting and before resampling (lowest index on ties), which after resampling need
+  // not be `best_particle`; empty before the first scan. Ids of the unknown-association
+  // landmarks are shared by the copies a map was resampled into, so they name the same
+  // landmarks in `map` wherever that particle's lineage and the best particle's agree.
+  std::vector<ObservationAssociation> associations;
   std::vector<MapLandmark> map;  // the best particle's map, in slot order
 };
 
@@ -105,12 +143,17 @@ class Filter {
   const FilterConfig& config() const noexcept;
 
   // Queues one odometry sample of duration dt. Throws std::invalid_argument (and queues
-  // nothing) unless dt >= 0 and every value is finite.
+  // nothing) unless dt >= 0 and every value is finite. The timed form also sets the filter's
+  // clock (Estimate::time) to `time`, which must be finite and not before the clock (unless no
+  // time was given yet); the untimed form advances the clock by dt.
   void predict(const Control& control, double dt);
+  void predict(const Control& control, double dt, double time);
 
   // Runs the queued controls and this scan through every particle, then resamples by policy.
-  // Throws std::invalid_argument (and changes nothing) for a bad observation.
+  // Throws std::invalid_argument (and changes nothing) for a bad observation or time (as
+  // predict's). The untimed form leaves the clock as it is.
   void observe(std::span<const Observation> scan);
+  void observe(std::span<const Observation> scan, double time);
 
   // Replaces every particle's map by `landmarks` (one map, shared by all particles): a prior
   // map, a relocalisation, or a pre-grown map for benchmarks. Slots are assigned in order;

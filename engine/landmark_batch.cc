@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 #include "engine/angles.h"
 #include "engine/landmark_ekf.h"
@@ -81,13 +82,14 @@ template <bool kOffset>
 // The scalar EKF of engine/landmark_ekf.h for one lane.
 void update_lane_scalar(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
                         const Eigen::Vector2d& z, PoseLanes pose, LandmarkLanes lm, double* log_w,
-                        std::size_t l) {
+                        double* mahalanobis2, std::size_t l) {
   LandmarkGaussian g;
   g.mean << lm.x[l], lm.y[l];
   g.cov << lm.sxx[l], lm.sxy[l], lm.sxy[l], lm.syy[l];
   const Pose p(pose.x[l], pose.y[l], pose.theta[l]);
   const LandmarkObservation terms = evaluate_observation(sensor, g, p, z, r);
   if (log_w != nullptr) log_w[l] += terms.log_likelihood;
+  if (mahalanobis2 != nullptr) mahalanobis2[l] = terms.mahalanobis2;
   apply_update(g, terms, r);
   lm.x[l] = g.mean[0];
   lm.y[l] = g.mean[1];
@@ -98,12 +100,13 @@ void update_lane_scalar(const RangeBearingModel& sensor, const Eigen::Matrix2d& 
 
 // Lanes [0, count) of the columns (already offset to the chunk); returns the flags of the lanes
 // left unchanged for the scalar path in `fallback`.
-template <bool kOffset, bool kWeight>
+template <bool kOffset, bool kWeight, bool kDistance>
 void update_chunk(const SensorOffset& off, double yaw, double r00, double r01, double r11,
                   double z0, double z1, const double* __restrict px, const double* __restrict py,
                   const double* __restrict pt, double* __restrict lx, double* __restrict ly,
                   double* __restrict lxx, double* __restrict lxy, double* __restrict lyy,
-                  double* __restrict log_w, std::size_t count, double* __restrict fallback) {
+                  double* __restrict log_w, double* __restrict mahalanobis2, std::size_t count,
+                  double* __restrict fallback) {
   // Restrict-qualified parameters (not struct members): GCC then needs no alias checks.
   for (std::size_t l = 0; l < count; ++l) {
     const double mx = lx[l];
@@ -130,11 +133,14 @@ void update_chunk(const SensorOffset& off, double yaw, double r00, double r01, d
     const double det = q00 * q11 - q01 * q01;
     good = good & (det > 0.0) & (det < 1e300);
     const double inv_det = 1.0 / det;
-    if constexpr (kWeight) {
+    if constexpr (kWeight || kDistance) {
       const double quad = v0 * v0 * q11 - 2.0 * v0 * v1 * q01 + v1 * v1 * q00;
-      const double ll =
-          -kLogTwoPi - 0.5 * log_positive(select(good, det, 1.0)) - 0.5 * (quad * inv_det);
-      log_w[l] = select(good, log_w[l] + ll, log_w[l]);
+      if constexpr (kWeight) {
+        const double ll =
+            -kLogTwoPi - 0.5 * log_positive(select(good, det, 1.0)) - 0.5 * (quad * inv_det);
+        log_w[l] = select(good, log_w[l] + ll, log_w[l]);
+      }
+      if constexpr (kDistance) mahalanobis2[l] = quad * inv_det;  // a fallback lane rewrites it
     }
     // K = Sigma G^T Q^-1 = (G Sigma)^T Q^-1.
     const double i00 = q11 * inv_det;
@@ -176,38 +182,48 @@ void update_chunk(const SensorOffset& off, double yaw, double r00, double r01, d
 
 void update_landmark_lanes(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
                            const Eigen::Vector2d& z, PoseLanes pose, LandmarkLanes lm,
-                           double* log_w, std::size_t lanes) {
+                           double* log_w, std::size_t lanes, double* mahalanobis2) {
   const SensorOffset& off = sensor.offset();
-  const bool has_offset = off.x != 0.0 || off.y != 0.0;
   const double yaw = wrap_angle(off.yaw);
   const double r00 = r(0, 0);
   const double r01 = 0.5 * (r(0, 1) + r(1, 0));
   const double r11 = r(1, 1);
   double fallback[kChunk];  // 1 for a lane left to the scalar path
-  for (std::size_t first = 0; first < lanes; first += kChunk) {
-    const std::size_t count = std::min(kChunk, lanes - first);
-    const PoseLanes p{pose.x + first, pose.y + first, pose.theta + first};
-    const LandmarkLanes m{lm.x + first, lm.y + first, lm.sxx + first, lm.sxy + first,
-                          lm.syy + first};
-    double* w = log_w == nullptr ? nullptr : log_w + first;
-    if (has_offset) {
-      if (w != nullptr) {
-        update_chunk<true, true>(off, yaw, r00, r01, r11, z[0], z[1], p.x, p.y, p.theta, m.x, m.y,
-                                 m.sxx, m.sxy, m.syy, w, count, fallback);
-      } else {
-        update_chunk<true, false>(off, yaw, r00, r01, r11, z[0], z[1], p.x, p.y, p.theta, m.x, m.y,
-                                  m.sxx, m.sxy, m.syy, w, count, fallback);
+  // The chunk loop for one combination of the three options, each a compile-time constant.
+  const auto run = [&](auto offset, auto weight, auto distance) {
+    for (std::size_t first = 0; first < lanes; first += kChunk) {
+      const std::size_t count = std::min(kChunk, lanes - first);
+      const PoseLanes p{pose.x + first, pose.y + first, pose.theta + first};
+      const LandmarkLanes m{lm.x + first, lm.y + first, lm.sxx + first, lm.sxy + first,
+                            lm.syy + first};
+      double* w = decltype(weight)::value ? log_w + first : nullptr;
+      double* d2 = decltype(distance)::value ? mahalanobis2 + first : nullptr;
+      update_chunk<decltype(offset)::value, decltype(weight)::value, decltype(distance)::value>(
+          off, yaw, r00, r01, r11, z[0], z[1], p.x, p.y, p.theta, m.x, m.y, m.sxx, m.sxy, m.syy, w,
+          d2, count, fallback);
+      for (std::size_t l = 0; l < count; ++l) {
+        if (fallback[l] != 0.0) update_lane_scalar(sensor, r, z, p, m, w, d2, l);
       }
-    } else if (w != nullptr) {
-      update_chunk<false, true>(off, yaw, r00, r01, r11, z[0], z[1], p.x, p.y, p.theta, m.x, m.y,
-                                m.sxx, m.sxy, m.syy, w, count, fallback);
+    }
+  };
+  const auto with_distance = [&](auto offset, auto weight) {
+    if (mahalanobis2 != nullptr) {
+      run(offset, weight, std::true_type{});
     } else {
-      update_chunk<false, false>(off, yaw, r00, r01, r11, z[0], z[1], p.x, p.y, p.theta, m.x, m.y,
-                                 m.sxx, m.sxy, m.syy, w, count, fallback);
+      run(offset, weight, std::false_type{});
     }
-    for (std::size_t l = 0; l < count; ++l) {
-      if (fallback[l] != 0.0) update_lane_scalar(sensor, r, z, p, m, w, l);
+  };
+  const auto with_weight = [&](auto offset) {
+    if (log_w != nullptr) {
+      with_distance(offset, std::true_type{});
+    } else {
+      with_distance(offset, std::false_type{});
     }
+  };
+  if (off.x != 0.0 || off.y != 0.0) {
+    with_weight(std::true_type{});
+  } else {
+    with_weight(std::false_type{});
   }
 }
 

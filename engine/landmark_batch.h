@@ -37,11 +37,12 @@ struct PoseLanes {
 
 // For every lane l < lanes: the observation z = (range, bearing in (-pi, pi]) of landmark l
 // from pose l under `sensor` with noise `r` (symmetric positive definite): adds ln N(v; 0, Q)
-// (eq. 31) to log_w[l] unless log_w is null, then updates landmark l (eq. 25, Joseph form) as
+// (eq. 31) to log_w[l] unless log_w is null, writes the squared Mahalanobis distance v^T Q^-1 v
+// to mahalanobis2[l] unless that is null, then updates landmark l (eq. 25, Joseph form) as
 // apply_update does.
 void update_landmark_lanes(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
                            const Eigen::Vector2d& z, PoseLanes pose, LandmarkLanes lm,
-                           double* log_w, std::size_t lanes);
+                           double* log_w, std::size_t lanes, double* mahalanobis2 = nullptr);
 
 // Pose proposals N(mean, cov) of state dimension N (heading = component 2, in (-pi, pi]):
 // N mean columns and the N (N + 1) / 2 columns of the covariance's upper triangle, row by row

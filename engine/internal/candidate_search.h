@@ -149,14 +149,16 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
         if constexpr (kFs2) {
           const ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, in.r);
           if (t.mahalanobis2 <= gate && !(kMl && t.log_likelihood < log_p0)) {
-            scratch.candidates.push_back({obs, e.slot, t.log_likelihood});
+            scratch.candidates.push_back(
+                {obs, e.slot, t.log_likelihood, 0, static_cast<float>(t.mahalanobis2)});
           }
         } else {
           const LandmarkObservation t = evaluate_observation(sensor, lm, pose, z, in.r);
           if (t.mahalanobis2 <= gate && !(kMl && t.log_likelihood < log_p0)) {
             const auto tag = static_cast<std::uint32_t>(scratch.terms.size());
             scratch.terms.push_back(t);
-            scratch.candidates.push_back({obs, e.slot, t.log_likelihood, tag});
+            scratch.candidates.push_back(
+                {obs, e.slot, t.log_likelihood, tag, static_cast<float>(t.mahalanobis2)});
           }
         }
       });

@@ -1,5 +1,6 @@
 // The state of a Filter that outlives a call: configuration, node heap, particles and their maps,
-// FastSLAM 2.0 covariances, the queue of controls, the known-id table and the counters. The
+// FastSLAM 2.0 covariances, the queue of controls, the known-id table, the counters, the clock
+// and the last scan's report. The
 // stages read and change it; the Filter facade (engine/filter.cc) owns it, and state_io.h saves
 // and loads it. Thread safety: thread-compatible; the passes change disjoint particles
 // concurrently and `phase_times` per thread. Costs: construction O(M).
@@ -14,6 +15,7 @@
 #include "engine/filter_config.h"
 #include "engine/internal/pose_covariance.h"
 #include "engine/internal/scan_plan.h"
+#include "engine/internal/scan_report.h"
 #include "engine/measurement_model.h"
 #include "memory/node_heap.h"
 #include "memory/particle_store.h"
@@ -58,6 +60,11 @@ struct FilterState {
   // of eq. 70 over the observations seen so far, and of set_map's), for the candidate search.
   double landmark_variance_bound = 0.0;
   FilterCounters counters;
+  // The clock (Estimate::time): the data's time; `timed` once a time was given.
+  double time = 0.0;
+  bool timed = false;
+  ScanRecords records;  // the scan being processed, per particle
+  std::vector<ObservationAssociation> associations;  // the last scan's report
   mutable tbb::combinable<PhaseTimes> phase_times;  // combine_each is not const
 };
 

@@ -1,6 +1,7 @@
 #include "engine/internal/known_update.h"
 
 #include <algorithm>
+#include <limits>
 
 #include "engine/landmark_batch.h"
 #include "engine/landmark_ekf.h"
@@ -80,14 +81,15 @@ void propose_block_known(const KnownInput& in, const std::vector<PlannedObservat
 template <bool kWeigh>
 void update_block_known(const KnownInput& in, const std::vector<PlannedObservation>& scan,
                         memory::ParticleStore& store, std::size_t begin, std::size_t end,
-                        KnownScratch& scratch) {
+                        ScanRecords& records, KnownScratch& scratch) {
   const std::size_t count = end - begin;
   const std::size_t lanes = padded_lanes(count);
-  // Columns: pose x, y, theta; landmark x, y, sxx, sxy, syy; the scan's log-likelihood sum.
-  scratch.columns.resize(9 * lanes);
+  // Columns: pose x, y, theta; landmark x, y, sxx, sxy, syy; the scan's log-likelihood sum; the
+  // observation's squared Mahalanobis distance.
+  scratch.columns.resize(10 * lanes);
   scratch.edited.resize(count);
-  double* col[9];
-  for (int c = 0; c < 9; ++c) col[c] = scratch.columns.data() + c * lanes;
+  double* col[10];
+  for (int c = 0; c < 10; ++c) col[c] = scratch.columns.data() + c * lanes;
   const double* const pose_col[3] = {store.x().data(), store.y().data(), store.theta().data()};
   for (int c = 0; c < 3; ++c) {
     std::copy_n(pose_col[c] + begin, count, col[c]);
@@ -100,9 +102,11 @@ void update_block_known(const KnownInput& in, const std::vector<PlannedObservati
   const PoseLanes poses{col[0], col[1], col[2]};
   const LandmarkLanes lm{col[3], col[4], col[5], col[6], col[7]};
   const auto step_now = static_cast<std::int64_t>(in.scan_step);
-  for (const PlannedObservation& o : scan) {
+  for (std::size_t j = 0; j < scan.size(); ++j) {
+    const PlannedObservation& o = scan[j];
     if (o.is_new) {
       for (std::size_t l = 0; l < count; ++l) {
+        records.mahalanobis2(begin + l)[j] = std::numeric_limits<double>::infinity();
         const Pose pose(col[0][l], col[1][l], col[2][l]);
         memory::Landmark stored;
         store_gaussian(initialize_landmark(*in.sensor, pose, o.z, in.r), stored);
@@ -122,8 +126,10 @@ void update_block_known(const KnownInput& in, const std::vector<PlannedObservati
       lm.sxy[l] = stored.sxy;
       lm.syy[l] = stored.syy;
     }
-    update_landmark_lanes(*in.sensor, in.r, o.z, poses, lm, kWeigh ? col[8] : nullptr, lanes);
+    update_landmark_lanes(*in.sensor, in.r, o.z, poses, lm, kWeigh ? col[8] : nullptr, lanes,
+                          col[9]);
     for (std::size_t l = 0; l < count; ++l) {
+      records.mahalanobis2(begin + l)[j] = col[9][l];
       memory::Landmark& stored = *scratch.edited[l];
       stored.x = lm.x[l];
       stored.y = lm.y[l];
@@ -148,9 +154,9 @@ template void propose_block_known<5>(const KnownInput&, const std::vector<Planne
                                      std::size_t, const double*, KnownScratch&);
 template void update_block_known<true>(const KnownInput&, const std::vector<PlannedObservation>&,
                                        memory::ParticleStore&, std::size_t, std::size_t,
-                                       KnownScratch&);
+                                       ScanRecords&, KnownScratch&);
 template void update_block_known<false>(const KnownInput&, const std::vector<PlannedObservation>&,
                                         memory::ParticleStore&, std::size_t, std::size_t,
-                                        KnownScratch&);
+                                        ScanRecords&, KnownScratch&);
 
 }  // namespace fastslam::engine::internal

@@ -27,6 +27,7 @@
 #include "engine/filter_config.h"
 #include "engine/internal/pose_covariance.h"
 #include "engine/internal/scan_plan.h"
+#include "engine/internal/scan_report.h"
 #include "engine/measurement_model.h"
 #include "memory/particle_store.h"
 
@@ -55,11 +56,13 @@ void propose_block_known(const KnownInput& in, const std::vector<PlannedObservat
                          std::size_t begin, std::size_t end, const double* draws,
                          KnownScratch& scratch);
 
-// Particles [begin, end): the scan's landmark updates; with kWeigh (FastSLAM 1.0) the weights.
+// Particles [begin, end): the scan's landmark updates, each observation's squared Mahalanobis
+// distance in the particles' rows of `records` (+inf for a new landmark); with kWeigh
+// (FastSLAM 1.0) the weights.
 template <bool kWeigh>
 void update_block_known(const KnownInput& in, const std::vector<PlannedObservation>& scan,
                         memory::ParticleStore& store, std::size_t begin, std::size_t end,
-                        KnownScratch& scratch);
+                        ScanRecords& records, KnownScratch& scratch);
 
 extern template void propose_block_known<3>(const KnownInput&,
                                             const std::vector<PlannedObservation>&,
@@ -72,10 +75,10 @@ extern template void propose_block_known<5>(const KnownInput&,
 extern template void update_block_known<true>(const KnownInput&,
                                               const std::vector<PlannedObservation>&,
                                               memory::ParticleStore&, std::size_t, std::size_t,
-                                              KnownScratch&);
+                                              ScanRecords&, KnownScratch&);
 extern template void update_block_known<false>(const KnownInput&,
                                                const std::vector<PlannedObservation>&,
                                                memory::ParticleStore&, std::size_t, std::size_t,
-                                               KnownScratch&);
+                                               ScanRecords&, KnownScratch&);
 
 }  // namespace fastslam::engine::internal

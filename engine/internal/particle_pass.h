@@ -5,8 +5,10 @@
 // instantiations compile in parallel. Thread safety and costs: as pass.h.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <numeric>
 #include <span>
@@ -147,7 +149,8 @@ class ParticlePass final : public Pass {
           propose_block_known<N>(in.known, *scan, s_.store, s_.covariances, begin, end,
                                  scratch.draws.data(), scratch.known);
         }
-        update_block_known<!kFs2>(in.known, *scan, s_.store, begin, end, scratch.known);
+        update_block_known<!kFs2>(in.known, *scan, s_.store, begin, end, s_.records,
+                                  scratch.known);
       } else {
         associate_seconds = update_block_unknown(in, *scan, t1, begin, end, scratch, counts);
       }
@@ -223,6 +226,26 @@ class ParticlePass final : public Pass {
       }
     }
     s_.store.log_weight()[i] += log_w;
+    record(scratch.search.candidates, chosen, i);
+  }
+
+  // Particle i's row of the scan report (scan_report.h): its choices, and per observation the
+  // distance of the chosen pair, or for a new landmark the nearest candidate's.
+  void record(std::span<const AssociationCandidate> candidates, std::span<const std::int64_t> chosen,
+              std::size_t i) {
+    std::int64_t* const assignment = s_.records.assignment(i);
+    double* const d2 = s_.records.mahalanobis2(i);
+    std::copy(chosen.begin(), chosen.end(), assignment);
+    std::fill_n(d2, chosen.size(), std::numeric_limits<double>::infinity());
+    for (const AssociationCandidate& c : candidates) {
+      const std::int64_t taken = chosen[c.observation];
+      const double m2 = c.mahalanobis2;
+      if (taken == c.slot) {
+        d2[c.observation] = m2;
+      } else if (taken == kNewLandmark) {
+        d2[c.observation] = std::min(d2[c.observation], m2);
+      }
+    }
   }
 
   Motion motion_;

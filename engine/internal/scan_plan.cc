@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <string>
 #include <unordered_set>
@@ -19,6 +20,20 @@ void check_control(const Control& control, double dt) {
     throw std::invalid_argument("Filter::predict: control values must be finite (got " +
                                 std::to_string(control.u0) + ", " + std::to_string(control.u1) +
                                 ")");
+  }
+}
+
+void check_time(double time, double clock, bool timed) {
+  if (!std::isfinite(time)) {
+    throw std::invalid_argument("Filter: time must be finite (got " + std::to_string(time) + ")");
+  }
+  if (timed && time < clock) {
+    char text[160];
+    std::snprintf(text, sizeof(text),
+                  "Filter: time goes backwards: %.17g s after %.17g s (data must come in time "
+                  "order)",
+                  time, clock);
+    throw std::invalid_argument(text);
   }
 }
 

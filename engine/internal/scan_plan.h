@@ -52,6 +52,10 @@ struct ScanPlan {
 // Throws std::invalid_argument unless dt >= 0 and every value is finite.
 void check_control(const Control& control, double dt);
 
+// Throws std::invalid_argument unless `time` is finite and, once the clock was set (`timed`), not
+// before `clock`.
+void check_time(double time, double clock, bool timed);
+
 // Validates `scan` (finite values, range > 0; known ids: id >= 0 and not repeated; unknown: fewer
 // than kObservationsPerScanLimit observations) and plans it. Throws std::invalid_argument naming
 // the first bad observation.

@@ -17,7 +17,7 @@ namespace fastslam::engine::internal {
 namespace {
 
 constexpr char kMagic[8] = {'F', 'S', 'L', 'A', 'M', 'S', 'T', '1'};
-constexpr std::uint32_t kVersion = 2;  // 2: unknown association (variance bound, free slots)
+constexpr std::uint32_t kVersion = 3;  // 3: the clock and the last scan's report
 constexpr std::uint64_t kLimit = std::uint64_t{1} << 34;
 
 [[noreturn]] void corrupt(const std::string& what) {
@@ -74,6 +74,47 @@ struct KnownSlot {
   std::uint32_t zero = 0;
 };
 static_assert(sizeof(KnownSlot) == 16 && std::is_trivially_copyable_v<KnownSlot>);
+
+// One entry of the last scan's report, with its padding spelled out (and zero).
+struct SavedAssociation {
+  std::uint32_t observation = 0;
+  std::uint8_t outcome = 0;
+  std::uint8_t zero[3] = {0, 0, 0};
+  std::uint64_t landmark_id = 0;
+  double mahalanobis2 = 0.0;
+};
+static_assert(sizeof(SavedAssociation) == 24 && std::is_trivially_copyable_v<SavedAssociation>);
+
+std::vector<SavedAssociation> saved(const std::vector<ObservationAssociation>& report) {
+  std::vector<SavedAssociation> out;
+  out.reserve(report.size());
+  for (const ObservationAssociation& a : report) {
+    SavedAssociation e;
+    e.observation = a.observation;
+    e.outcome = static_cast<std::uint8_t>(a.outcome);
+    e.landmark_id = a.landmark_id;
+    e.mahalanobis2 = a.mahalanobis2;
+    out.push_back(e);
+  }
+  return out;
+}
+
+std::vector<ObservationAssociation> get_report(std::istream& in) {
+  const std::vector<SavedAssociation> entries = get_vector<SavedAssociation>(in, kLimit);
+  std::vector<ObservationAssociation> report;
+  report.reserve(entries.size());
+  for (std::size_t j = 0; j < entries.size(); ++j) {
+    const SavedAssociation& e = entries[j];
+    if (e.observation != j || e.outcome > static_cast<std::uint8_t>(AssociationOutcome::kDiscarded) ||
+        e.zero[0] != 0 || e.zero[1] != 0 || e.zero[2] != 0 || std::isnan(e.mahalanobis2) ||
+        e.mahalanobis2 < 0) {
+      corrupt("scan report");
+    }
+    report.push_back({e.observation, static_cast<AssociationOutcome>(e.outcome), e.landmark_id,
+                      e.mahalanobis2});
+  }
+  return report;
+}
 static_assert(sizeof(PendingControl) == 32 && sizeof(TrajectoryPoint) == 32,
               "saved structs must have no padding");
 
@@ -188,6 +229,9 @@ void save_state(const FilterState& s, const std::vector<TrajectoryPoint>& trajec
     put(out, v);
   }
   put(out, s.landmark_variance_bound);
+  put(out, s.time);
+  put<std::uint8_t>(out, s.timed ? 1 : 0);
+  put_vector(out, saved(s.associations));
   put_vector(out, s.pending);
   put_vector(out, trajectory);
   std::vector<KnownSlot> known;
@@ -232,6 +276,11 @@ StateHeader read_header(std::istream& in) {
   }
   h.variance_bound = get<double>(in);
   if (!std::isfinite(h.variance_bound) || h.variance_bound < 0) corrupt("variance bound");
+  h.time = get<double>(in);
+  const auto timed = get<std::uint8_t>(in);
+  if (!std::isfinite(h.time) || timed > 1) corrupt("clock");
+  h.timed = timed == 1;
+  h.associations = get_report(in);
   h.pending = get_vector<PendingControl>(in, kLimit);
   for (const PendingControl& p : h.pending) {
     if (!std::isfinite(p.u0) || !std::isfinite(p.u1) || !std::isfinite(p.dt) || p.dt < 0 ||
@@ -254,6 +303,9 @@ void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
   const std::span<double> kept = s.covariances.values();
   std::copy_n(h.covariances.begin(), kept.size(), kept.begin());
   s.landmark_variance_bound = h.variance_bound;
+  s.time = h.time;
+  s.timed = h.timed;
+  s.associations = std::move(h.associations);
   memory::ParticleStore& store = s.store;
   get_columns(in, store);
   const bool known_ids = s.config.association == Association::kKnown;

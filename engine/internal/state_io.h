@@ -1,8 +1,9 @@
 // Saving and loading a filter's whole state (engine/filter.h save / load) in a versioned binary
 // format of native byte order: magic, version, sizeof(FilterConfig), the config bytes (padding
-// zeroed), counters, the landmark variance bound, queued controls, recorded trajectory points,
-// the known-id table, the FastSLAM 2.0 covariances, the particle columns, then per particle
-// either "same map as particle i-1" or its landmarks (slot, value). Spatial indices are not
+// zeroed), counters, the landmark variance bound, the clock, the last scan's report, queued
+// controls, recorded trajectory points, the known-id table, the FastSLAM 2.0 covariances, the
+// particle columns, then per particle either "same map as particle i-1" or its landmarks (slot,
+// value). Spatial indices are not
 // written: they are rebuilt from the maps (an index's entries are its map's slots and means, and
 // queries are exact, so the rebuilt index answers the same). Equal states save equal bytes.
 // Loading trusts nothing: every length is checked against what the configuration implies and
@@ -26,6 +27,9 @@ struct StateHeader {
   FilterConfig config;
   FilterCounters counters;  // the saved ones; the timings and the evidence start at zero
   double variance_bound = 0.0;
+  double time = 0.0;
+  bool timed = false;
+  std::vector<ObservationAssociation> associations;
   std::vector<PendingControl> pending;
   std::vector<TrajectoryPoint> trajectory;
   KnownSlots known;

@@ -9,10 +9,12 @@
 #include <cstring>
 #include <functional>
 #include <iostream>
+#include <map>
 #include <limits>
 #include <memory>
 #include <numbers>
 #include <random>
+#include <set>
 #include <span>
 #include <sstream>
 #include <stdexcept>
@@ -26,6 +28,8 @@
 #include <Eigen/LU>
 #include <gtest/gtest.h>
 
+#include "engine/landmark_ekf.h"
+#include "engine/measurement_model.h"
 #include "engine/motion_model.h"
 #include "memory/landmark_tree.h"
 #include "memory/particle_store.h"
@@ -577,12 +581,14 @@ TEST_P(FilterAlgorithmTest, SaveLoadContinuesBitIdentically) {
   }
 }
 
-// Offsets in the saved format (engine/filter.cc): magic, version, sizeof(FilterConfig), config,
-// six counters, the landmark variance bound, then length-prefixed vectors (queued controls,
+// Offsets in the saved format (engine/internal/state_io.h): magic, version, sizeof(FilterConfig),
+// config, six counters, the landmark variance bound, the clock (time, flag), then
+// length-prefixed vectors (the last scan's report of 24-byte entries, queued controls,
 // trajectory, known ids, pose covariances), the six columns and the maps.
 constexpr std::size_t kConfigAt = 8 + 4 + 8;
 constexpr std::size_t kCountersAt = kConfigAt + sizeof(FilterConfig);
-constexpr std::size_t kPendingAt = kCountersAt + 6 * 8 + 8;
+constexpr std::size_t kClockAt = kCountersAt + 6 * 8 + 8;
+constexpr std::size_t kReportAt = kClockAt + 8 + 1;
 
 template <class T>
 void poke(std::string& bytes, std::size_t at, T value) {
@@ -649,7 +655,20 @@ TEST(FilterSaveTest, LoadRefusesCorruptAndTruncatedStreams) {
     poke<std::uint32_t>(b, kConfigAt + offsetof(FilterConfig, particles), 2000000000u);
     refused(b, "Filter::load");
   }
+  {
+    std::string b = good;
+    poke<double>(b, kClockAt, kNaN);
+    refused(b, "clock");
+  }
+  const auto reported = peek<std::uint64_t>(good, kReportAt);
+  ASSERT_GT(reported, 0u);
+  {  // The first entry's outcome: no such value.
+    std::string b = good;
+    poke<std::uint8_t>(b, kReportAt + 8 + 4, 7);
+    refused(b, "scan report");
+  }
   // Vectors whose length prefix is huge: refused without allocating gigabytes.
+  const std::size_t kPendingAt = kReportAt + 8 + 24 * reported;
   ASSERT_EQ(peek<std::uint64_t>(good, kPendingAt), 1u);
   for (const std::uint64_t length : {std::uint64_t{1} << 28, std::uint64_t{1} << 33,
                                      std::uint64_t{1} << 40, ~std::uint64_t{0}}) {
@@ -1118,6 +1137,7 @@ TEST(FilterWeightTest, FastSlam2MatchesFoldedEq61ProposalDrawAndDenseEkf) {
 struct BruteMean {
   double x = 0, y = 0, theta = 0, ess = 0;
   std::size_t best = 0;
+  double cov[9] = {};  // (x, y, theta) about the mean, heading differences wrapped
 };
 
 BruteMean brute_force_mean(const memory::ParticleStore& store) {
@@ -1140,6 +1160,19 @@ BruteMean brute_force_mean(const memory::ParticleStore& store) {
   out.y = static_cast<double>(y / w);
   out.theta = static_cast<double>(std::atan2(s, c));
   out.ess = static_cast<double>(w * w / w2);
+  long double cov[3][3] = {};
+  for (std::size_t i = 0; i < lw.size(); ++i) {
+    const long double wi = std::exp(static_cast<long double>(lw[i] - lw[out.best]));
+    const long double d[3] = {store.x()[i] - static_cast<long double>(out.x),
+                              store.y()[i] - static_cast<long double>(out.y),
+                              wrap(store.theta()[i] - out.theta)};
+    for (int r = 0; r < 3; ++r) {
+      for (int k = 0; k < 3; ++k) cov[r][k] += wi * d[r] * d[k];
+    }
+  }
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) out.cov[3 * r + k] = static_cast<double>(cov[r][k] / w);
+  }
   return out;
 }
 
@@ -1176,6 +1209,11 @@ TEST_P(FilterAlgorithmTest, EstimateIsTheBruteForceWeightedMeanAndBestParticle) 
     ASSERT_NEAR(wrap(est.mean_pose[2] - want.theta), 0.0, 1e-12);
     ASSERT_NEAR(est.effective_sample_size, want.ess, 1e-9 * want.ess);
     ASSERT_EQ(est.best_particle, want.best);
+    for (int k = 0; k < 9; ++k) {
+      ASSERT_NEAR(est.pose_covariance[k], want.cov[k], 1e-9 * (1e-6 + std::abs(want.cov[k])))
+          << "entry " << k;
+    }
+    ASSERT_EQ(est.pose_covariance[1], est.pose_covariance[3]);
     for (int k = 0; k < 3; ++k) {
       const double column = k == 0   ? store.x()[want.best]
                             : k == 1 ? store.y()[want.best]
@@ -1231,6 +1269,106 @@ TEST_P(FilterAlgorithmTest, TrajectoryIsTheWeightedMeanAfterEveryControl) {
   Filter silent(config);
   feed(silent, s.events, 0, 50);
   EXPECT_TRUE(silent.take_trajectory().empty());
+}
+
+TEST(FilterClockTest, TimesSetTheClockAndMayNotGoBackwards) {
+  const Scenario& s = loop_scenario();
+  Filter filter(base_config(Algorithm::kFastSlam1, 10));
+  EXPECT_EQ(filter.estimate().time, 0.0);
+  filter.predict(s.events[0].control, 0.25);  // untimed: the clock advances by dt
+  EXPECT_EQ(filter.estimate().time, 0.25);
+  filter.predict(s.events[0].control, 0.25, -100.0);  // the first time given may be any
+  EXPECT_EQ(filter.estimate().time, -100.0);
+  filter.predict(s.events[0].control, 0.5);
+  EXPECT_EQ(filter.estimate().time, -99.5);
+  filter.observe({}, -99.5);  // equal times are fine
+  filter.observe({});         // untimed scans leave the clock
+  EXPECT_EQ(filter.estimate().time, -99.5);
+  const std::string before = saved(filter);
+  expect_throw_with<std::invalid_argument>(
+      [&] { filter.predict(s.events[0].control, 0.1, -99.6); }, "time goes backwards");
+  expect_throw_with<std::invalid_argument>([&] { filter.observe({}, -200.0); },
+                                           "time goes backwards");
+  expect_throw_with<std::invalid_argument>([&] { filter.observe({}, kNaN); }, "finite");
+  expect_throw_with<std::invalid_argument>([&] { filter.predict({}, 0.1, kInf); }, "finite");
+  // A bad control with a good time: refused, and the clock is not moved.
+  expect_throw_with<std::invalid_argument>([&] { filter.predict({kNaN, 0.0}, 0.1, 5.0); },
+                                           "finite");
+  EXPECT_TRUE(saved(filter) == before) << "a refused call changed the state";
+  filter.observe({}, 7.0);
+  EXPECT_EQ(filter.estimate().time, 7.0);
+  EXPECT_EQ(loaded(saved(filter))->estimate().time, 7.0);  // the clock is saved
+  const std::unique_ptr<Filter> copy = loaded(saved(filter));
+  EXPECT_THROW(copy->observe({}, 6.0), std::invalid_argument);  // and so is "timed"
+}
+
+// The landmarks of particle i's map by id.
+std::map<std::uint64_t, memory::Landmark> landmarks_by_id(const memory::ParticleStore& store,
+                                                          std::size_t i) {
+  std::map<std::uint64_t, memory::Landmark> out;
+  for (const auto [slot, lm] : store.map(i).tree()) out.emplace(lm.id, lm);
+  return out;
+}
+
+std::size_t most_likely(const memory::ParticleStore& store) {
+  const std::span<const double> lw = store.log_weight();
+  return static_cast<std::size_t>(std::max_element(lw.begin(), lw.end()) - lw.begin());
+}
+
+Eigen::Matrix2d noise_of(const FilterConfig& c) {
+  return Eigen::Vector2d(c.sensor.sigma_range * c.sensor.sigma_range,
+                         c.sensor.sigma_bearing * c.sensor.sigma_bearing)
+      .asDiagonal();
+}
+
+// Known ids, resampling off (so the most likely particle after the scan is the one the report
+// was made for): each observation names its id, "new" exactly on first sight, and its distance
+// is the scalar EKF's at that particle's pose (FastSLAM 2.0: the drawn one) against the landmark
+// as it was before the scan.
+TEST_P(FilterAlgorithmTest, AssociationsAreTheMostLikelyParticlesKnownIdsAndDistances) {
+  const Scenario& s = loop_scenario();
+  FilterConfig config = base_config(GetParam(), 20);
+  config.resample.ess_fraction = 0.0;
+  Filter filter(config);
+  const RangeBearingModel sensor(config.sensor.offset);
+  const Eigen::Matrix2d r = noise_of(config);
+  EXPECT_TRUE(filter.estimate().associations.empty());
+  int scans = 0, associated = 0, fresh = 0;
+  for (const Event& e : s.events) {
+    if (!e.is_scan || scans++ % 7 != 0 || e.scan.empty()) {
+      apply(filter, e);
+      continue;
+    }
+    const std::unique_ptr<Filter> before = loaded(saved(filter));
+    filter.observe(e.scan);
+    const std::size_t best = most_likely(filter.particles());
+    const std::map<std::uint64_t, memory::Landmark> prior =
+        landmarks_by_id(before->particles(), best);
+    const Eigen::Vector3d pose = pose_of(filter.particles(), best);
+    const std::vector<ObservationAssociation> got = filter.estimate().associations;
+    ASSERT_EQ(got.size(), e.scan.size());
+    for (std::size_t j = 0; j < got.size(); ++j) {
+      ASSERT_EQ(got[j].observation, j);
+      ASSERT_EQ(got[j].landmark_id, static_cast<std::uint64_t>(e.scan[j].id));
+      const auto it = prior.find(got[j].landmark_id);
+      if (it == prior.end()) {
+        ASSERT_EQ(got[j].outcome, AssociationOutcome::kNew);
+        ASSERT_EQ(got[j].mahalanobis2, kInf);
+        ++fresh;
+        continue;
+      }
+      ASSERT_EQ(got[j].outcome, AssociationOutcome::kAssociated);
+      const LandmarkGaussian lm = to_gaussian(it->second);
+      const double want =
+          evaluate_observation(sensor, lm, Pose(pose[0], pose[1], pose[2]),
+                               {e.scan[j].range, wrap(e.scan[j].bearing)}, r)
+              .mahalanobis2;
+      ASSERT_NEAR(got[j].mahalanobis2, want, 1e-9 * (1.0 + want)) << "observation " << j;
+      ++associated;
+    }
+  }
+  EXPECT_GT(associated, 100);
+  EXPECT_GT(fresh, 10);
 }
 
 // ---- 8, 9. Accuracy on Bailey's webmap --------------------------------------------------------
@@ -1546,6 +1684,84 @@ INSTANTIATE_TEST_SUITE_P(
 // footprint queries return exactly what brute force over the map returns: checked along a run
 // with clutter, where landmarks are created, moved by updates, removed by negative information,
 // and shared and path-copied by resampling.
+// Unknown association on the cluttered loop, resampling off: every observation of the most
+// likely particle either updated a landmark its map held before the scan (at the distance the
+// scalar terms give, FastSLAM 1.0; within the gate, 2.0) or started the landmark the map now
+// holds under the id (scan step) 2^20 + j; a new one reports the nearest candidate it left,
+// which for FastSLAM 1.0 is the brute-force minimum over the map of the pairs the association
+// may consider (within the gate; ML: no less likely than a new landmark).
+TEST_P(FilterUnknownAssociationTest, AssociationsAreTheMostLikelyParticlesChoices) {
+  const Scenario& s = clutter_scenario();
+  FilterConfig c = config(20);
+  c.resample.ess_fraction = 0.0;
+  Filter filter(c);
+  const RangeBearingModel sensor(c.sensor.offset);
+  const Eigen::Matrix2d r = noise_of(c);
+  const bool fs1 = c.algorithm == Algorithm::kFastSlam1;
+  const bool ml = c.association == Association::kMaximumLikelihood;
+  int scans = 0, associated = 0, fresh = 0, fresh_near = 0;
+  for (const Event& e : s.events) {
+    if (!e.is_scan || scans++ % 5 != 0 || e.scan.empty()) {
+      apply(filter, e);
+      continue;
+    }
+    const FilterStatistics stats = filter.statistics();
+    const std::uint64_t scan_step = stats.controls + stats.scans;
+    const std::unique_ptr<Filter> before = loaded(saved(filter));
+    filter.observe(e.scan);
+    const std::size_t best = most_likely(filter.particles());
+    const memory::ParticleStore& was = before->particles();
+    const std::map<std::uint64_t, memory::Landmark> prior = landmarks_by_id(was, best);
+    const std::map<std::uint64_t, memory::Landmark> now =
+        landmarks_by_id(filter.particles(), best);
+    const Pose pose(was.x()[best], was.y()[best], was.theta()[best]);
+    const std::vector<ObservationAssociation> got = filter.estimate().associations;
+    ASSERT_EQ(got.size(), e.scan.size());
+    std::set<std::uint64_t> taken;
+    for (std::size_t j = 0; j < got.size(); ++j) {
+      const Eigen::Vector2d z(e.scan[j].range, wrap(e.scan[j].bearing));
+      ASSERT_EQ(got[j].observation, j);
+      if (got[j].outcome == AssociationOutcome::kAssociated) {
+        const auto it = prior.find(got[j].landmark_id);
+        ASSERT_NE(it, prior.end()) << "observation " << j << " names no landmark of the map";
+        ASSERT_TRUE(taken.insert(got[j].landmark_id).second) << "a landmark taken twice";
+        ASSERT_LE(got[j].mahalanobis2, c.gating.gate * (1 + 1e-6));
+        if (fs1) {
+          const double want =
+              evaluate_observation(sensor, to_gaussian(it->second), pose, z, r).mahalanobis2;
+          ASSERT_NEAR(got[j].mahalanobis2, want, 1e-6 * (1.0 + want)) << "observation " << j;
+        }
+        ++associated;
+        continue;
+      }
+      ASSERT_EQ(got[j].outcome, AssociationOutcome::kNew);
+      ASSERT_EQ(got[j].landmark_id, scan_step * (std::uint64_t{1} << 20) + j);
+      ASSERT_TRUE(now.contains(got[j].landmark_id)) << "the new landmark is not in the map";
+      ++fresh;
+      if (got[j].mahalanobis2 != kInf) ++fresh_near;
+      if (!fs1) continue;
+      double nearest = kInf;
+      for (const auto& [id, lm] : prior) {
+        const LandmarkObservation t = evaluate_observation(sensor, to_gaussian(lm), pose, z, r);
+        if (t.mahalanobis2 > c.gating.gate || (ml && t.log_likelihood < c.log_new_landmark)) {
+          continue;
+        }
+        nearest = std::min(nearest, t.mahalanobis2);
+      }
+      if (nearest == kInf) {
+        ASSERT_EQ(got[j].mahalanobis2, kInf) << "observation " << j;
+      } else {
+        ASSERT_NEAR(got[j].mahalanobis2, nearest, 1e-6 * (1.0 + nearest)) << "observation " << j;
+      }
+    }
+  }
+  EXPECT_GT(associated, 100);
+  EXPECT_GT(fresh, 20);
+  if (!ml) {
+    EXPECT_GT(fresh_near, 0) << "sampling never chose new beside a candidate";
+  }
+}
+
 TEST_P(FilterUnknownAssociationTest, SpatialIndexStaysExactAgainstBruteForce) {
   const Scenario& s = clutter_scenario();
   FilterConfig c = config(24);

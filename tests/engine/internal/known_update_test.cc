@@ -5,6 +5,7 @@
 #include "engine/internal/known_update.h"
 
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -93,19 +94,27 @@ TEST(KnownUpdateTest, FastSlam1MatchesTheScalarEkfPerParticle) {
   World w(13, 5, 0);
   World start(13, 5, 0);
   KnownScratch scratch;
-  update_block_known<true>(w.in, w.scan, w.store, 0, 5, scratch);
-  update_block_known<true>(w.in, w.scan, w.store, 5, 13, scratch);
+  ScanRecords records;
+  records.reset(13, w.scan.size());
+  update_block_known<true>(w.in, w.scan, w.store, 0, 5, records, scratch);
+  update_block_known<true>(w.in, w.scan, w.store, 5, 13, records, scratch);
   for (std::size_t i = 0; i < 13; ++i) {
     double log_w = start.store.log_weight()[i];
     ASSERT_EQ(w.store.map(i).size(), 7u);
-    for (const PlannedObservation& o : w.scan) {
+    for (std::size_t j = 0; j < w.scan.size(); ++j) {
+      const PlannedObservation& o = w.scan[j];
       const memory::Landmark& got = w.store.map(i).at(o.slot);
+      const double d2 = records.mahalanobis2(i)[j];
       LandmarkGaussian want;
       if (o.is_new) {
         want = initialize_landmark(w.sensor, start.pose(i), o.z, w.in.r);
         EXPECT_EQ(got.log_odds, 0.5);
+        EXPECT_EQ(d2, std::numeric_limits<double>::infinity());
       } else {
         want = to_gaussian(start.store.map(i).at(o.slot));
+        const LandmarkObservation terms =
+            evaluate_observation(w.sensor, want, start.pose(i), o.z, w.in.r);
+        EXPECT_NEAR(d2, terms.mahalanobis2, kTol * (1.0 + terms.mahalanobis2));
         log_w += update_landmark(w.sensor, want, start.pose(i), o.z, w.in.r);
         EXPECT_EQ(got.log_odds, 1.25);
       }
@@ -162,7 +171,9 @@ TEST(KnownUpdateTest, FastSlam2ProposalMatchesTheScalarFoldsAndDraw) {
 TEST(KnownUpdateTest, FastSlam2UpdateLeavesTheWeights) {
   World w(9, 3, 0);
   KnownScratch scratch;
-  update_block_known<false>(w.in, w.scan, w.store, 0, 9, scratch);
+  ScanRecords records;
+  records.reset(9, w.scan.size());
+  update_block_known<false>(w.in, w.scan, w.store, 0, 9, records, scratch);
   for (std::size_t i = 0; i < 9; ++i) {
     EXPECT_EQ(w.store.log_weight()[i], -1.0 * static_cast<double>(i));
     EXPECT_EQ(w.store.map(i).size(), 5u);
