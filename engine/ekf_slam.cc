@@ -15,6 +15,7 @@
 #include <Eigen/Core>
 
 #include "engine/angles.h"
+#include "engine/internal/scan_plan.h"
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
 #include "engine/motion_dispatch.h"
@@ -464,6 +465,8 @@ struct EkfSlam::Impl {
   std::vector<TrajectoryPoint> trajectory;
   EkfAssociationCounts counts;
   std::uint64_t step = 0;  // events so far (controls and scans), as Filter counts them
+  double time = 0.0;       // the clock, as Filter keeps it
+  bool timed = false;
   std::uint64_t controls = 0, scans = 0, observations = 0;
   double predict_seconds = 0.0, update_seconds = 0.0;
   Eigen::MatrixXd columns;  // scratch: the columns of P that H touches
@@ -498,6 +501,23 @@ void EkfSlam::predict(const Control& control, double dt) {
   ++s.step;
   ++s.controls;
   s.predict_seconds += seconds_between(t0, Clock::now());
+  s.time += dt;
+}
+
+void EkfSlam::predict(const Control& control, double dt, double time) {
+  Impl& s = *impl_;
+  internal::check_time(time, s.time, s.timed);
+  predict(control, dt);
+  s.time = time;
+  s.timed = true;
+}
+
+void EkfSlam::observe(std::span<const Observation> scan, double time) {
+  Impl& s = *impl_;
+  internal::check_time(time, s.time, s.timed);
+  observe(scan);
+  s.time = time;
+  s.timed = true;
 }
 
 void EkfSlam::observe(std::span<const Observation> scan) {
@@ -527,7 +547,7 @@ void EkfSlam::observe(std::span<const Observation> scan) {
   s.update_seconds += seconds_between(t0, Clock::now());
 }
 
-Estimate EkfSlam::estimate() const {
+Estimate EkfSlam::estimate(EstimateMap map_part) const {
   const Impl& s = *impl_;
   Estimate e;
   for (int k = 0; k < s.d; ++k) e.mean_pose[k] = e.best_pose[k] = s.x[k];
@@ -536,6 +556,9 @@ Estimate EkfSlam::estimate() const {
   }
   e.best_particle = 0;
   e.effective_sample_size = 1.0;
+  e.time = s.time;
+  e.map_size = s.landmarks();
+  if (map_part == EstimateMap::kSizeOnly) return e;
   e.map.reserve(s.landmarks());
   for (std::size_t i = 0; i < s.landmarks(); ++i) {
     const Index a = s.offset_of(i);

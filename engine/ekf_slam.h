@@ -43,16 +43,19 @@ class EkfSlam {
   // One odometry sample of duration dt, applied at once. Throws std::invalid_argument (and
   // changes nothing) unless dt >= 0 and every value is finite.
   void predict(const Control& control, double dt);
+  // As Filter's: sets the clock (Estimate::time); refused when it goes backwards.
+  void predict(const Control& control, double dt, double time);
 
   // Associates and applies one scan. Throws std::invalid_argument (and changes nothing) for a
   // bad observation.
   void observe(std::span<const Observation> scan);
+  void observe(std::span<const Observation> scan, double time);
 
   // mean_pose = best_pose = the EKF mean, pose_covariance its pose block; best_particle 0,
-  // effective_sample_size 1; time 0 and no associations (yet); the map in
+  // effective_sample_size 1; the clock as Filter's; no associations; the map in
   // landmark order (slot = index) with the 2x2 marginal covariances, id = the observations' id
   // in known mode and the landmark's index under ML, log_odds 0.
-  Estimate estimate() const;
+  Estimate estimate(EstimateMap map = EstimateMap::kCopy) const;
 
   // Counters and times (update_seconds = observe_wall_seconds = time in observe); no resampling;
   // live_nodes 0 and live_bytes = the bytes of the dense mean and covariance.

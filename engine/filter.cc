@@ -130,7 +130,7 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
   s.landmark_variance_bound = checked.variance_bound;
 }
 
-Estimate Filter::estimate() {
+Estimate Filter::estimate(EstimateMap map_part) {
   impl_->drain();
   const memory::ParticleStore& store = impl_->state.store;
   const std::size_t m = store.size();
@@ -205,6 +205,8 @@ Estimate Filter::estimate() {
                                store.v()[best], store.omega()[best]};
   std::copy(std::begin(best_pose), std::end(best_pose), e.best_pose);
   const memory::LandmarkTree& map = store.map(best).tree();
+  e.map_size = map.size();
+  if (map_part == EstimateMap::kSizeOnly) return e;
   e.map.reserve(map.size());
   for (const auto [slot, lm] : map) {
     e.map.push_back({slot, lm.id, lm.x, lm.y, lm.sxx, lm.sxy, lm.syy, lm.log_odds, lm.last_seen});

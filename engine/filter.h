@@ -15,6 +15,7 @@
 // docs/engine.md describes the algorithm and the stages a step runs through.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
@@ -96,8 +97,12 @@ struct Estimate {
   // landmarks are shared by the copies a map was resampled into, so they name the same
   // landmarks in `map` wherever that particle's lineage and the best particle's agree.
   std::vector<ObservationAssociation> associations;
-  std::vector<MapLandmark> map;  // the best particle's map, in slot order
+  std::vector<MapLandmark> map;  // the best particle's map, in slot order (EstimateMap::kCopy)
+  std::size_t map_size = 0;      // its landmarks, copied or not
 };
+
+// Whether `estimate` copies the best particle's map (O(N)) or only counts it (O(1)).
+enum class EstimateMap : std::uint8_t { kCopy, kSizeOnly };
 
 // The weighted-mean pose after one control (FilterConfig::record_trajectory).
 struct TrajectoryPoint {
@@ -166,7 +171,8 @@ class Filter {
   void set_map(std::span<const MapLandmark> landmarks);
 
   // Drains the queue (as observe would, without a scan) and summarises the particles.
-  Estimate estimate();
+  // Costs O(M + Z), plus O(N) to copy the map.
+  Estimate estimate(EstimateMap map = EstimateMap::kCopy);
 
   FilterStatistics statistics() const;
 

@@ -283,7 +283,16 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   if (given("--field-of-view-deg"))
     o.model.field_of_view = w.field_of_view_deg * std::numbers::pi / 180;
   if (given("--max-steps")) o.max_steps = w.max_steps;
-  if (given("--seeds")) o.seeds = parse_seeds(w.seeds);
+  if (given("--seeds")) {
+    o.seeds = parse_seeds(w.seeds);
+    if (!o.stream.empty()) {
+      throw std::invalid_argument("--stream writes the scans of one run; drop it or --seeds");
+    }
+    if (o.data == "-") {
+      throw std::invalid_argument(
+          "--data - (standard input) can be read once; --seeds needs a file it can read again");
+    }
+  }
   if (given("--match-radius")) o.match_radius = w.match_radius;
   if (given("--rpe-delta")) o.rpe_delta = w.rpe_delta;
   if (given("--max-seconds")) o.max_seconds = w.max_seconds;
@@ -394,6 +403,10 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "CSV file of errors over time, one row per --trace-every scans (t, pose error, "
                  "landmark RMSE of the seen landmarks, landmarks in the map, the particle set's "
                  "N_eff, distinct survivors, spread and the truth's distance in spreads)");
+  cmd.add_option("--stream", o.stream,
+                 "write a JSON line per scan as it is processed (time, pose, covariance, "
+                 "landmark count, the scan's associations, latency) to FILE, or - for standard "
+                 "output (the summary then goes to standard error)");
   cmd.add_option("--max-steps", w.max_steps,
                  "stop after this many controls and report what the run has (default: none)")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 62));

@@ -25,6 +25,7 @@
 #include "tools/cli/run_output.h"
 #include "tools/cli/run_recorder.h"
 #include "tools/cli/run_report.h"
+#include "tools/cli/scan_stream.h"
 #include "tools/eval/map_evaluation.h"
 #include "tools/eval/map_metrics.h"
 #include "tools/eval/particle_diagnostics.h"
@@ -121,6 +122,7 @@ struct RunLoop {
   TruthTracker& truth;
   RunRecorder& recorder;
   TraceWriter* trace;  // null: no trace
+  ScanStream* stream;  // null: no stream
   ProgressBar& progress;
   ProgressState& state;
 };
@@ -190,7 +192,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
   std::vector<engine::Observation> scan;
   const Clock::time_point start = Clock::now();
   std::optional<StampedPose> last_truth;
-  std::uint64_t controls = 0;
+  std::uint64_t controls = 0, scans = 0;
   for (std::uint64_t index = 0;; ++index) {
     const auto t0 = Clock::now();
     if (loop.options.max_seconds &&
@@ -198,7 +200,15 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
       r.ended_by = "--max-seconds";
       break;
     }
-    if (!loop.source.next(event, scan)) break;
+    try {
+      if (!loop.source.next(event, scan)) break;
+    } catch (const std::runtime_error& e) {
+      // A record the source cannot read (a pipe's malformed line): the run ends here and
+      // reports what it has; run_once raises the error once the results are written.
+      r.ended_by = "input error";
+      r.input_error = e.what();
+      break;
+    }
     const auto t1 = Clock::now();
     double trace_seconds = 0.0;
     try {
@@ -208,15 +218,20 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             r.ended_by = "--max-steps";
             break;
           }
-          filter.predict(event.control, event.dt);
+          filter.predict(event.control, event.dt, event.time);
           ++controls;
           loop.recorder.control(event);
           break;
         case EventKind::kScan:
           prepare_scan(loop, index, event.time, scan, r);
           loop.truth.see(scan);
-          filter.observe(scan);
+          filter.observe(scan, event.time);
           loop.recorder.estimates(filter.take_trajectory());
+          if (loop.stream != nullptr) {
+            loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
+                               seconds_since(t0));
+          }
+          ++scans;
           if (loop.trace != nullptr && loop.trace->due()) {
             const auto t_trace = Clock::now();
             trace_row(filter, loop, last_truth, event.time);
@@ -419,7 +434,10 @@ nlohmann::json run_once(const RunOptions& options) {
   }
   RunRecorder recorder(info.header, tracked_point_offset(options, info.header), options.out,
                        *resolved.rpe_delta);
-  RunLoop loop{resolved, association, *source, truth, recorder, trace.get(), progress, state};
+  std::unique_ptr<ScanStream> stream;
+  if (!options.stream.empty()) stream = std::make_unique<ScanStream>(options.stream);
+  RunLoop loop{resolved,    association,  *source,  truth, recorder,
+               trace.get(), stream.get(), progress, state};
   if (ekf) {
     engine::EkfSlam filter(config);
     drive(filter, loop, r);
@@ -436,13 +454,25 @@ nlohmann::json run_once(const RunOptions& options) {
   }
   const RunSettings settings{resolved, info, config, association, particles};
   nlohmann::json metrics = metrics_json(settings, r);
-  print_summary(settings, r);
-  if (options.out.empty()) return metrics;
-  write_run_files(options.out, {.metrics = &metrics,
-                                .streamed = r.trajectories.files,
-                                .map = r.estimate.map,
-                                .true_landmarks = info.landmarks});
-  if (!options.plot_script.empty()) draw_map(options.plot_script, options.out);
+  // With the scans streamed to standard output, everything else goes to standard error.
+  std::FILE* const text = options.stream == "-" ? stderr : stdout;
+  print_summary(settings, r, text);
+  if (!options.out.empty()) {
+    write_run_files(options.out,
+                    {.metrics = &metrics,
+                     .streamed = r.trajectories.files,
+                     .map = r.estimate.map,
+                     .true_landmarks = info.landmarks},
+                    text);
+    if (!options.plot_script.empty()) draw_map(options.plot_script, options.out, text);
+  }
+  if (r.input_error) {
+    throw std::runtime_error(*r.input_error + (options.out.empty()
+                                                   ? std::string()
+                                                   : "; the results up to the record before it "
+                                                     "are in " +
+                                                         options.out));
+  }
   return metrics;
 }
 

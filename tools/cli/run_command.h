@@ -108,6 +108,9 @@ struct RunOptions {
   // Costs per row: an estimate (O(M + N), the best map copied out) and its scoring.
   std::string trace;
   std::uint64_t trace_every = 1;
+  // A JSON line per scan as it is processed (tools/cli/scan_stream.h), to a file or "-" for
+  // standard output (the summary then goes to standard error). Empty: none.
+  std::string stream;
   bool progress = true;  // a progress bar on stderr when it is a terminal
   // With `out`: the matplotlib script run as `/usr/bin/python3 SCRIPT OUT` after the files are
   // written, to draw OUT/map.png (the command line sets tools/scripts/plot_run.py unless

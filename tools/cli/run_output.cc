@@ -7,6 +7,7 @@
 #include <spawn.h>
 #include <stdexcept>
 #include <sys/wait.h>
+#include <unistd.h>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -74,7 +75,7 @@ void TraceWriter::close() {
   if (!file_) throw std::runtime_error("--trace " + path_ + ": write failed");
 }
 
-void write_run_files(const std::string& dir, const RunFiles& files) {
+void write_run_files(const std::string& dir, const RunFiles& files, std::FILE* out) {
   std::filesystem::create_directories(dir);
   auto open = [&](const std::string& name) {
     std::ofstream file(dir + "/" + name);
@@ -94,11 +95,12 @@ void write_run_files(const std::string& dir, const RunFiles& files) {
     write_true_landmarks_csv(file, files.true_landmarks);
     written += ",true_landmarks.csv";
   }
-  std::printf("  wrote %s/{%s}\n", dir.c_str(), written.c_str());
+  std::fprintf(out, "  wrote %s/{%s}\n", dir.c_str(), written.c_str());
 }
 
-void draw_map(const std::string& script, const std::string& dir) {
+void draw_map(const std::string& script, const std::string& dir, std::FILE* out) {
   std::fflush(stdout);
+  std::fflush(stderr);
   const std::string python = "/usr/bin/python3";
   std::vector<std::string> args = {python, script, dir};
   std::vector<char*> argv;
@@ -106,7 +108,12 @@ void draw_map(const std::string& script, const std::string& dir) {
   argv.push_back(nullptr);
   pid_t pid = 0;
   int status = 0;
-  const int spawned = posix_spawn(&pid, python.c_str(), nullptr, nullptr, argv.data(), environ);
+  // The script's own output goes where the run's text goes.
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  if (out != stdout) posix_spawn_file_actions_adddup2(&actions, fileno(out), STDOUT_FILENO);
+  const int spawned = posix_spawn(&pid, python.c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
   if (spawned != 0) {
     std::fprintf(stderr, "warning: map.png not drawn: cannot start %s: %s\n", python.c_str(),
                  std::strerror(spawned));

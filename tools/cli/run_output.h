@@ -9,6 +9,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <fstream>
 #include <optional>
 #include <span>
@@ -56,10 +57,10 @@ struct RunFiles {
 // Creates `dir` and writes the files (true_landmarks.csv only when there are some); prints the
 // list of every file of the run.
 // Throws std::runtime_error naming a file that cannot be written.
-void write_run_files(const std::string& dir, const RunFiles& files);
+void write_run_files(const std::string& dir, const RunFiles& files, std::FILE* out = stdout);
 
 // Runs `/usr/bin/python3 SCRIPT DIR`. The run's results stand whatever it does, so a failure
 // is a warning on stderr naming the command and its exit status.
-void draw_map(const std::string& script, const std::string& dir);
+void draw_map(const std::string& script, const std::string& dir, std::FILE* out = stdout);
 
 }  // namespace fastslam::tools

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <optional>
 #include <span>
 #include <string>
@@ -46,7 +47,8 @@ struct RunResult {
   double open_seconds = 0.0;             // opening the source: reading and parsing a recorded one
   double source_seconds = 0.0;           // its events after that (for a simulator: simulating)
   double filter_seconds = 0.0;           // the filter, trace rows excluded
-  std::string ended_by = "end of data";  // or "--max-steps", "--max-seconds"
+  std::string ended_by = "end of data";  // or "--max-steps", "--max-seconds", "input error"
+  std::optional<std::string> input_error;  // the source's message, when it ended the run
   std::uint64_t unlabelled_discarded = 0;
 };
 
@@ -64,7 +66,7 @@ bool worse_than_dead_reckoning(const RunResult& r);
 
 nlohmann::json metrics_json(const RunSettings& s, const RunResult& r);
 
-// The headline and the detail lines on stdout; the dead-reckoning warning on stderr.
-void print_summary(const RunSettings& s, const RunResult& r);
+// The headline and the detail lines on `out`; the dead-reckoning warning on stderr.
+void print_summary(const RunSettings& s, const RunResult& r, std::FILE* out = stdout);
 
 }  // namespace fastslam::tools

@@ -37,9 +37,4 @@ std::string LogSource::where(std::uint64_t index) const {
   return Source::where(index);
 }
 
-std::unique_ptr<Source> open_log_source(const SourceOptions& o) {
-  if (o.data.empty()) throw std::invalid_argument("--source log needs --data FILE.log");
-  return std::make_unique<LogSource>(read_log(o.data), o.data);
-}
-
 }  // namespace fastslam::tools

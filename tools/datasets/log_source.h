@@ -1,6 +1,5 @@
-// A source over a log held in memory: `--source log` reads a native log file
-// (docs/log-format.md) into one, and readers that convert a data set whole (Victoria Park) use
-// it for their events.
+// A source over a log held in memory: readers that convert a data set whole (Victoria Park,
+// UTIAS) use it for their events. (`--source log` streams its file: streamed_log_source.h.)
 //
 // Ownership: owns the log. Thread safety: thread-compatible. Costs: `next` copies a scan's
 // observations; the log is held whole (tools/io/log_format.h).

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <fstream>
 #include <istream>
+#include <memory>
 #include <numbers>
 #include <ostream>
 #include <span>
@@ -18,9 +19,10 @@
 #include "engine/motion_dispatch.h"
 
 namespace fastslam::tools {
-namespace {
 
 using engine::MotionKind;
+
+namespace {
 
 constexpr std::string_view kMagic = "fastslam-log";
 
@@ -38,27 +40,33 @@ void tokenize(std::string_view line, std::vector<std::string_view>& out) {
   }
 }
 
-class Parser {
+}  // namespace
+
+class LogReader::Parser {
  public:
   Parser(std::istream& in, const std::string& name) : in_(in), name_(name) {}
 
-  Log parse() {
-    Log log;
-    read_header(log.header);
-    std::unordered_set<std::uint64_t> landmark_ids;
-    double last_time = log.header.start_time;
+  void header(LogHeader& h) {
+    read_header(h);
+    last_time_ = h.start_time;
+  }
+
+  // The next record: an event (true, kind set) into `e` and `scan`, or a truth landmark
+  // appended to `landmarks` (and on to the next record); false at the end.
+  bool next(Event& e, std::vector<engine::Observation>& scan,
+            std::vector<TruthLandmark>& landmarks) {
     while (next_line()) {
       const std::string_view record = tokens_[0];
       if (record == "landmark") {
         fields(4, "landmark ID X Y");
         TruthLandmark l{integer(1, "landmark id"), number(2, "x"), number(3, "y")};
-        if (!landmark_ids.insert(l.id).second) {
+        if (!landmark_ids_.insert(l.id).second) {
           fail("landmark id " + std::to_string(l.id) + " is repeated");
         }
-        log.landmarks.push_back(l);
+        landmarks.push_back(l);
         continue;
       }
-      Event e;
+      e = Event{};
       if (record == "control") {
         fields(5, "control T DT U0 U1");
         e.kind = EventKind::kControl;
@@ -73,8 +81,8 @@ class Parser {
                " fields, found " + std::to_string(tokens_.size()));
         }
         e.kind = EventKind::kScan;
-        e.first = log.observations.size();
         e.count = static_cast<std::uint32_t>(n);
+        scan.clear();
         for (std::uint64_t k = 0; k < n; ++k) {
           const std::size_t f = 3 + 3 * k;
           engine::Observation z;
@@ -82,7 +90,7 @@ class Parser {
           if (!(z.range > 0)) fail("range must be > 0 (got " + std::string(tokens_[f]) + ")");
           z.bearing = number(f + 1, "bearing");
           z.id = tokens_[f + 2] == "-" ? -1 : static_cast<std::int64_t>(integer(f + 2, "id"));
-          log.observations.push_back(z);
+          scan.push_back(z);
         }
       } else if (record == "pose") {
         fields(5, "pose T X Y THETA");
@@ -99,16 +107,17 @@ class Parser {
         fail("unknown record '" + std::string(record) + "' (control, scan, pose, gps or landmark)");
       }
       e.time = number(1, "time");
-      if (e.time < last_time) {
-        fail("time goes backwards: " + std::string(tokens_[1]) + " after " + format(last_time));
+      if (e.time < last_time_) {
+        fail("time goes backwards: " + std::string(tokens_[1]) + " after " + format(last_time_));
       }
-      last_time = e.time;
-      log.events.push_back(e);
-      log.lines.push_back(line_);
+      last_time_ = e.time;
+      return true;
     }
     if (in_.bad()) fail("read error");
-    return log;
+    return false;
   }
+
+  std::uint64_t line() const noexcept { return line_; }
 
  private:
   void read_header(LogHeader& h) {
@@ -256,11 +265,15 @@ class Parser {
   }
 
   std::istream& in_;
-  const std::string& name_;
+  std::string name_;
   std::string text_;
   std::vector<std::string_view> tokens_;
-  std::size_t line_ = 0;
+  std::uint64_t line_ = 0;
+  double last_time_ = 0.0;
+  std::unordered_set<std::uint64_t> landmark_ids_;
 };
+
+namespace {
 
 void require_finite(double v, const char* what) {
   if (!std::isfinite(v)) {
@@ -312,7 +325,36 @@ bool operator==(const Log& a, const Log& b) {
   return true;
 }
 
-Log read_log(std::istream& in, const std::string& name) { return Parser(in, name).parse(); }
+LogReader::LogReader(std::istream& in, const std::string& name)
+    : parser_(std::make_unique<Parser>(in, name)) {
+  parser_->header(header_);
+}
+
+LogReader::~LogReader() = default;
+
+bool LogReader::next(Event& event, std::vector<engine::Observation>& scan) {
+  if (!parser_->next(event, scan, landmarks_)) return false;
+  line_ = parser_->line();
+  return true;
+}
+
+Log read_log(std::istream& in, const std::string& name) {
+  LogReader reader(in, name);
+  Log log;
+  log.header = reader.header();
+  Event e;
+  std::vector<engine::Observation> scan;
+  while (reader.next(e, scan)) {
+    if (e.kind == EventKind::kScan) {
+      e.first = log.observations.size();
+      log.observations.insert(log.observations.end(), scan.begin(), scan.end());
+    }
+    log.events.push_back(e);
+    log.lines.push_back(reader.line());
+  }
+  log.landmarks = reader.landmarks();
+  return log;
+}
 
 Log read_log(const std::string& path) {
   std::ifstream in(path);

@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <iosfwd>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -71,6 +72,35 @@ struct Log {
   // Not part of what the log holds (operator== ignores it).
   std::vector<std::uint64_t> lines;
   friend bool operator==(const Log& a, const Log& b);
+};
+
+// Reads a log record by record, for inputs too long to hold or still being written (a pipe):
+// the constructor reads the header, `next` one event at a time; truth landmarks are collected
+// as they come. Refusals throw as read_log does ("<name>:<line>: <reason>"), from the
+// constructor for the header and from `next` for the record they are in; the events before it
+// were returned. Borrows the stream. Costs: O(record) per call; memory O(one record +
+// landmarks).
+class LogReader {
+ public:
+  LogReader(std::istream& in, const std::string& name);
+  ~LogReader();
+  LogReader(const LogReader&) = delete;
+  LogReader& operator=(const LogReader&) = delete;
+
+  const LogHeader& header() const noexcept { return header_; }
+  // The next event, a scan's observations in `scan` (Event::first 0, count their number);
+  // false at the end of the stream. Landmark records on the way go to landmarks().
+  bool next(Event& event, std::vector<engine::Observation>& scan);
+  // The line of the last event `next` returned.
+  std::uint64_t line() const noexcept { return line_; }
+  const std::vector<TruthLandmark>& landmarks() const noexcept { return landmarks_; }
+
+ private:
+  class Parser;
+  std::unique_ptr<Parser> parser_;
+  LogHeader header_;
+  std::vector<TruthLandmark> landmarks_;
+  std::uint64_t line_ = 0;
 };
 
 // Reads a log file. Throws std::runtime_error naming the file, the line and the reason.

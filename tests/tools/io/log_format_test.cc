@@ -254,6 +254,66 @@ TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
   }
 }
 
+// The reader gives read_log's events one at a time, landmarks as they come, the line of each
+// event; a malformed record fails where it is, after the events before it were given.
+TEST(LogReader, StreamsWhatReadLogReadsAndFailsAtTheBadRecord) {
+  const Log log = sample_log(engine::MotionKind::kBaileyCar);
+  std::ostringstream text;
+  write_log(text, log);
+  std::istringstream whole(text.str());
+  const Log want = read_log(whole, "x.log");
+  std::istringstream in(text.str());
+  LogReader reader(in, "x.log");
+  EXPECT_TRUE(reader.header() == log.header);
+  Event e;
+  std::vector<engine::Observation> scan;
+  std::size_t k = 0;
+  while (reader.next(e, scan)) {
+    ASSERT_LT(k, want.events.size());
+    const Event& w = want.events[k];
+    EXPECT_EQ(e.kind, w.kind);
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(e.time), std::bit_cast<std::uint64_t>(w.time));
+    EXPECT_EQ(reader.line(), want.lines[k]);
+    if (e.kind == EventKind::kScan) {
+      ASSERT_EQ(scan.size(), w.count);
+      for (std::size_t j = 0; j < scan.size(); ++j) {
+        const engine::Observation& z = want.observations[w.first + j];
+        EXPECT_EQ(std::bit_cast<std::uint64_t>(scan[j].range), std::bit_cast<std::uint64_t>(z.range));
+        EXPECT_EQ(scan[j].id, z.id);
+      }
+    }
+    ++k;
+  }
+  EXPECT_EQ(k, want.events.size());
+  EXPECT_EQ(reader.landmarks(), log.landmarks);
+
+  // A bad record after three events: those three come out, then the error names its line.
+  std::string broken;
+  std::istringstream lines(text.str());
+  std::string line;
+  std::uint64_t number = 0, events = 0, bad_line = 0;
+  while (std::getline(lines, line)) {
+    ++number;
+    broken += line + "\n";
+    if (line.rfind("control", 0) == 0 && ++events == 3) {
+      broken += "control 99 0.1 nan 0\n";
+      bad_line = number + 1;
+      break;
+    }
+  }
+  std::istringstream bad(broken);
+  LogReader partial(bad, "<stdin>");
+  std::size_t given = 0;
+  try {
+    while (partial.next(e, scan)) ++given;
+    ADD_FAILURE() << "the bad record was accepted";
+  } catch (const std::runtime_error& error) {
+    EXPECT_EQ(std::string(error.what()).rfind("<stdin>:" + std::to_string(bad_line) + ": ", 0), 0u)
+        << error.what();
+  }
+  EXPECT_GE(given, 3u);
+}
+
 TEST(LogFormat, NothingPartialAndAMissingFileIsNamed) {
   EXPECT_THROW(read_log("/nonexistent/dir/x.log"), std::runtime_error);
   try {

@@ -1,0 +1,102 @@
+#include "tools/datasets/streamed_log_source.h"
+
+#include <fstream>
+#include <iostream>
+#include <stdexcept>
+#include <utility>
+
+namespace fastslam::tools {
+namespace {
+
+constexpr const char* kStdin = "<stdin>";
+
+Labels labels_of(std::size_t labelled, std::size_t all) {
+  return labelled == all ? Labels::kAll : labelled == 0 ? Labels::kNone : Labels::kSome;
+}
+
+std::unique_ptr<std::istream> open_file(const std::string& path) {
+  auto file = std::make_unique<std::ifstream>(path);
+  if (!*file) throw std::runtime_error(path + ": cannot open for reading");
+  return file;
+}
+
+}  // namespace
+
+StreamedLogSource::StreamedLogSource(const std::string& path)
+    : name_(path == "-" ? kStdin : path) {
+  info_.name = name_;
+  Event e;
+  std::vector<engine::Observation> scan;
+  if (path != "-") {
+    // The first pass: every record checked, and what the source knows up front.
+    const std::unique_ptr<std::istream> first = open_file(path);
+    LogReader check(*first, name_);
+    std::size_t labelled = 0, observations = 0;
+    while (check.next(e, scan)) {
+      info_.expected_controls += e.kind == EventKind::kControl;
+      observations += scan.size() * (e.kind == EventKind::kScan);
+      if (e.kind == EventKind::kScan) {
+        for (const engine::Observation& z : scan) labelled += z.id >= 0;
+      }
+    }
+    info_.labels = labels_of(labelled, observations);
+    info_.landmarks = check.landmarks();
+    file_ = open_file(path);
+    reader_ = std::make_unique<LogReader>(*file_, name_);
+    info_.header = reader_->header();
+    landmarks_known_ = info_.landmarks.size();
+    return;
+  }
+  std::ios::sync_with_stdio(false);  // buffered reads of a pipe, not a syscall per character
+  reader_ = std::make_unique<LogReader>(std::cin, name_);
+  info_.header = reader_->header();
+  info_.labels = Labels::kNone;  // until a scan with detections says otherwise
+  while (ahead_.size() < kLookahead && reader_->next(e, scan)) {
+    ahead_.push_back({e, scan, reader_->line()});
+    if (e.kind == EventKind::kScan && !scan.empty()) {
+      std::size_t labelled = 0;
+      for (const engine::Observation& z : scan) labelled += z.id >= 0;
+      info_.labels = labels_of(labelled, scan.size());
+      break;
+    }
+  }
+  info_.landmarks = reader_->landmarks();
+  landmarks_known_ = info_.landmarks.size();
+}
+
+StreamedLogSource::~StreamedLogSource() = default;
+
+bool StreamedLogSource::next(Event& event, std::vector<engine::Observation>& scan) {
+  if (!ahead_.empty()) {
+    Ahead& a = ahead_.front();
+    event = a.event;
+    scan.swap(a.scan);
+    line_ = a.line;
+    ahead_.pop_front();
+    ++index_;
+    return true;
+  }
+  if (!reader_->next(event, scan)) return false;
+  line_ = reader_->line();
+  ++index_;
+  if (file_ == nullptr && reader_->landmarks().size() != landmarks_known_) {
+    throw std::runtime_error(where(index_ - 1) +
+                             ": a truth landmark record came after the first event (above this "
+                             "line); from a pipe, 'landmark' records must come before the events");
+  }
+  return true;
+}
+
+std::string StreamedLogSource::where(std::uint64_t index) const {
+  if (index_ > 0 && index == index_ - 1) return name_ + ":" + std::to_string(line_);
+  return Source::where(index);
+}
+
+std::unique_ptr<Source> open_log_source(const SourceOptions& o) {
+  if (o.data.empty()) {
+    throw std::invalid_argument("--source log needs --data FILE.log (or - for standard input)");
+  }
+  return std::make_unique<StreamedLogSource>(o.data);
+}
+
+}  // namespace fastslam::tools
