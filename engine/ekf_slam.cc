@@ -22,6 +22,10 @@
 #include "engine/motion_model.h"
 
 namespace fastslam::engine {
+
+namespace {
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+}  // namespace
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -207,8 +211,9 @@ struct EkfSlam::Impl {
     return std::isfinite(out.d2);
   }
 
-  // One EKF update of landmark `landmark` with measurement z: O(n^2).
-  void update(std::size_t landmark, const Eigen::Vector2d& z, std::size_t obs_index) {
+  // One EKF update of landmark `landmark` with measurement z: O(n^2). Returns the squared
+  // Mahalanobis distance of the innovation.
+  double update(std::size_t landmark, const Eigen::Vector2d& z, std::size_t obs_index) {
     const Index a = offset_of(landmark);
     const auto lin = sensor.linearize(x.segment<2>(a), pose());
     // P H^T from the five columns H touches.
@@ -240,6 +245,7 @@ struct EkfSlam::Impl {
       p.col(j).segment(j, n - j) -=
           gain.col(0).segment(j, n - j) * c0 + gain.col(1).segment(j, n - j) * c1;
     }
+    return v.dot(s_inv * v);
   }
 
   // A new landmark from z at the current pose, with its cross-covariances. REQUIRES capacity.
@@ -291,10 +297,13 @@ struct EkfSlam::Impl {
     last_seen.reserve(last_seen.size() + fresh);
     index_of_id.reserve(index_of_id.size() + fresh);
     const auto step_now = static_cast<std::int64_t>(step);
+    report.assign(scan.size(), {});
     for (std::size_t j = 0; j < scan.size(); ++j) {
+      report[j] = {static_cast<std::uint32_t>(j), AssociationOutcome::kAssociated,
+                   static_cast<std::uint64_t>(scan[j].id), kInfinity};
       const auto found = index_of_id.find(scan[j].id);
       if (found == index_of_id.end()) continue;
-      update(found->second, measurement(scan[j]), j);
+      report[j].mahalanobis2 = update(found->second, measurement(scan[j]), j);
       last_seen[found->second] = step_now;
       ++counts.updated;
     }
@@ -302,6 +311,7 @@ struct EkfSlam::Impl {
       if (index_of_id.contains(scan[j].id)) continue;
       index_of_id.emplace(scan[j].id, landmarks());
       augment(measurement(scan[j]), scan[j].id, step_now);
+      report[j].outcome = AssociationOutcome::kNew;
       ++counts.created;
     }
   }
@@ -431,6 +441,14 @@ struct EkfSlam::Impl {
     ids.reserve(ids.size() + fresh);
     last_seen.reserve(last_seen.size() + fresh);
     const auto step_now = static_cast<std::int64_t>(step);
+    // The report: a pair's distance as the choice scored it, before the scan's updates.
+    report.assign(scan.size(), {});
+    for (const Candidate& c : accepted) {
+      if (match[c.obs] == c.landmark) {
+        report[c.obs] = {static_cast<std::uint32_t>(c.obs), AssociationOutcome::kAssociated,
+                         static_cast<std::uint64_t>(ids[c.landmark]), c.d2};
+      }
+    }
     for (std::size_t j = 0; j < scan.size(); ++j) {
       if (match[j] == kNone) continue;
       update(match[j], measurement(scan[j]), j);
@@ -439,7 +457,10 @@ struct EkfSlam::Impl {
     }
     for (std::size_t j = 0; j < scan.size(); ++j) {
       if (match[j] != kNone) continue;
+      report[j] = {static_cast<std::uint32_t>(j), AssociationOutcome::kDiscarded, 0, nearest[j]};
       if (nearest[j] > config.ekf.gate_new) {
+        report[j].outcome = AssociationOutcome::kNew;
+        report[j].landmark_id = landmarks();
         augment(measurement(scan[j]), static_cast<std::int64_t>(landmarks()), step_now);
         ++counts.created;
       } else {
@@ -467,6 +488,7 @@ struct EkfSlam::Impl {
   std::uint64_t step = 0;  // events so far (controls and scans), as Filter counts them
   double time = 0.0;       // the clock, as Filter keeps it
   bool timed = false;
+  std::vector<ObservationAssociation> report;  // the last scan's
   std::uint64_t controls = 0, scans = 0, observations = 0;
   double predict_seconds = 0.0, update_seconds = 0.0;
   Eigen::MatrixXd columns;  // scratch: the columns of P that H touches
@@ -557,6 +579,7 @@ Estimate EkfSlam::estimate(EstimateMap map_part) const {
   e.best_particle = 0;
   e.effective_sample_size = 1.0;
   e.time = s.time;
+  e.associations = s.report;
   e.map_size = s.landmarks();
   if (map_part == EstimateMap::kSizeOnly) return e;
   e.map.reserve(s.landmarks());

@@ -52,7 +52,10 @@ class EkfSlam {
   void observe(std::span<const Observation> scan, double time);
 
   // mean_pose = best_pose = the EKF mean, pose_covariance its pose block; best_particle 0,
-  // effective_sample_size 1; the clock as Filter's; no associations; the map in
+  // effective_sample_size 1; the clock as Filter's; the last scan's associations (known ids: the
+  // distance at the state its update saw; ML: as the choice scored it before the scan's
+  // updates; a new landmark's or a discarded observation's: to the nearest landmark, which
+  // for a discarded one lies between the gates); the map in
   // landmark order (slot = index) with the 2x2 marginal covariances, id = the observations' id
   // in known mode and the landmark's index under ML, log_odds 0.
   Estimate estimate(EstimateMap map = EstimateMap::kCopy) const;

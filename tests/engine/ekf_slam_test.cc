@@ -595,13 +595,26 @@ TEST(EkfSlamAssociationTest, GatesAndMutualExclusion) {
                                         after.dropped - before.dropped};
   };
   using Counts = std::array<std::uint64_t, 3>;  // updated, created, dropped
+  // The scan's report: outcome, landmark id and squared distance per observation.
+  const auto expect_report = [&](std::size_t j, AssociationOutcome outcome, std::uint64_t id,
+                                 double d2) {
+    const std::vector<ObservationAssociation> report = ekf.estimate().associations;
+    ASSERT_LT(j, report.size());
+    EXPECT_EQ(report[j].observation, j);
+    EXPECT_EQ(report[j].outcome, outcome) << "observation " << j;
+    EXPECT_EQ(report[j].landmark_id, id) << "observation " << j;
+    EXPECT_NEAR(report[j].mahalanobis2, d2, 1e-6) << "observation " << j;
+  };
   EXPECT_EQ(counts_after({{10.0 + 0.5 * unit, 0.0, -1}}), (Counts{1, 0, 0}));
+  expect_report(0, AssociationOutcome::kAssociated, 0, 0.25);
   EXPECT_EQ(ekf.landmark_count(), 2u);
   // After an update the landmark is tighter, so measure the gates against a fresh landmark.
   ekf.observe(std::vector<Observation>{{10.0, -std::numbers::pi / 2, -1}});
   ASSERT_EQ(ekf.landmark_count(), 3u);
   EXPECT_EQ(counts_after({{10.0 + 3 * unit, -std::numbers::pi / 2, -1}}), (Counts{0, 0, 1}));
+  expect_report(0, AssociationOutcome::kDiscarded, 0, 9.0);
   EXPECT_EQ(counts_after({{10.0 + 5 * unit, -std::numbers::pi / 2, -1}}), (Counts{0, 1, 0}));
+  expect_report(0, AssociationOutcome::kNew, 3, 25.0);
   ASSERT_EQ(ekf.landmark_count(), 4u);
   EXPECT_NEAR(ekf.mean()[3 + 6], 0.0, 1e-9);
   EXPECT_NEAR(ekf.mean()[3 + 7], -10.0 - 5 * unit, 1e-9);
@@ -611,6 +624,8 @@ TEST(EkfSlamAssociationTest, GatesAndMutualExclusion) {
   EXPECT_EQ(counts_after({{10.0 + 1.5 * unit, std::numbers::pi / 2, -1},
                           {10.0 - 0.2 * unit, std::numbers::pi / 2, -1}}),
             (Counts{1, 0, 1}));
+  expect_report(0, AssociationOutcome::kDiscarded, 0, 2.25);
+  expect_report(1, AssociationOutcome::kAssociated, 1, 0.04);
   EXPECT_LT(std::abs(ekf.mean()[3 + 3] - 10.0), 0.2 * unit) << "the closer observation won";
   // ML ids are the landmark indices.
   const Estimate e = ekf.estimate();
