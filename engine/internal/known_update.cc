@@ -106,7 +106,7 @@ void update_block_known(const KnownInput& in, const std::vector<PlannedObservati
     const PlannedObservation& o = scan[j];
     if (o.is_new) {
       for (std::size_t l = 0; l < count; ++l) {
-        records.mahalanobis2(begin + l)[j] = std::numeric_limits<double>::infinity();
+        records.mahalanobis2(j, begin + l) = std::numeric_limits<double>::infinity();
         const Pose pose(col[0][l], col[1][l], col[2][l]);
         memory::Landmark stored;
         store_gaussian(initialize_landmark(*in.sensor, pose, o.z, in.r), stored);
@@ -128,8 +128,8 @@ void update_block_known(const KnownInput& in, const std::vector<PlannedObservati
     }
     update_landmark_lanes(*in.sensor, in.r, o.z, poses, lm, kWeigh ? col[8] : nullptr, lanes,
                           col[9]);
+    std::copy_n(col[9], count, &records.mahalanobis2(j, begin));
     for (std::size_t l = 0; l < count; ++l) {
-      records.mahalanobis2(begin + l)[j] = col[9][l];
       memory::Landmark& stored = *scratch.edited[l];
       stored.x = lm.x[l];
       stored.y = lm.y[l];

@@ -233,17 +233,19 @@ class ParticlePass final : public Pass {
   // distance of the chosen pair, or for a new landmark the nearest candidate's.
   void record(std::span<const AssociationCandidate> candidates, std::span<const std::int64_t> chosen,
               std::size_t i) {
-    std::int64_t* const assignment = s_.records.assignment(i);
-    double* const d2 = s_.records.mahalanobis2(i);
-    std::copy(chosen.begin(), chosen.end(), assignment);
-    std::fill_n(d2, chosen.size(), std::numeric_limits<double>::infinity());
+    ScanRecords& records = s_.records;
+    for (std::size_t j = 0; j < chosen.size(); ++j) {
+      records.assignment(j, i) = chosen[j];
+      records.mahalanobis2(j, i) = std::numeric_limits<double>::infinity();
+    }
     for (const AssociationCandidate& c : candidates) {
       const std::int64_t taken = chosen[c.observation];
       const double m2 = c.mahalanobis2;
+      double& d2 = records.mahalanobis2(c.observation, i);
       if (taken == c.slot) {
-        d2[c.observation] = m2;
+        d2 = m2;
       } else if (taken == kNewLandmark) {
-        d2[c.observation] = std::min(d2[c.observation], m2);
+        d2 = std::min(d2, m2);
       }
     }
   }

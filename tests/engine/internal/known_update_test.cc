@@ -104,7 +104,7 @@ TEST(KnownUpdateTest, FastSlam1MatchesTheScalarEkfPerParticle) {
     for (std::size_t j = 0; j < w.scan.size(); ++j) {
       const PlannedObservation& o = w.scan[j];
       const memory::Landmark& got = w.store.map(i).at(o.slot);
-      const double d2 = records.mahalanobis2(i)[j];
+      const double d2 = records.mahalanobis2(j, i);
       LandmarkGaussian want;
       if (o.is_new) {
         want = initialize_landmark(w.sensor, start.pose(i), o.z, w.in.r);
