@@ -14,6 +14,28 @@ target_compile_options(fastslam_warnings INTERFACE
   $<$<CXX_COMPILER_ID:GNU>:-Wno-maybe-uninitialized>
   $<$<BOOL:${FASTSLAM_WERROR}>:-Werror>)
 
+# A portable build (FASTSLAM_PORTABLE) compiles every target for FASTSLAM_PORTABLE_ARCH and
+# refuses flags that would tie it to this machine or to a newer instruction set: only the
+# random-stream kernels go beyond the baseline, each copy behind a run-time check
+# (parallel/CMakeLists.txt). FASTSLAM_X86_64 says whether those copies exist.
+set(FASTSLAM_X86_64 OFF)
+if(CMAKE_SYSTEM_PROCESSOR MATCHES "^(x86_64|AMD64|amd64)$")
+  set(FASTSLAM_X86_64 ON)
+endif()
+if(FASTSLAM_PORTABLE)
+  string(TOUPPER "${CMAKE_BUILD_TYPE}" _fastslam_type)
+  foreach(_fastslam_flags CMAKE_CXX_FLAGS CMAKE_CXX_FLAGS_${_fastslam_type})
+    if(" ${${_fastslam_flags}} " MATCHES " -(march|mtune|mcpu)=|native| -m(avx|fma|sse|bmi)")
+      message(FATAL_ERROR "FASTSLAM_PORTABLE: ${_fastslam_flags} ('${${_fastslam_flags}}') "
+        "chooses an instruction set; remove it (the package preset's flags are -O3 -DNDEBUG) and "
+        "set FASTSLAM_PORTABLE_ARCH instead")
+    endif()
+  endforeach()
+  if(FASTSLAM_X86_64)
+    add_compile_options(-march=${FASTSLAM_PORTABLE_ARCH})
+  endif()
+endif()
+
 add_library(fastslam_sanitize INTERFACE)
 if(FASTSLAM_SANITIZE)
   list(JOIN FASTSLAM_SANITIZE "," _fastslam_san)
