@@ -14,6 +14,28 @@ target_compile_options(fastslam_warnings INTERFACE
   $<$<CXX_COMPILER_ID:GNU>:-Wno-maybe-uninitialized>
   $<$<BOOL:${FASTSLAM_WERROR}>:-Werror>)
 
+# A portable build (FASTSLAM_PORTABLE) compiles every target for FASTSLAM_PORTABLE_ARCH and
+# refuses flags that would tie it to this machine or to a newer instruction set: only the
+# random-stream kernels go beyond the baseline, each copy behind a run-time check
+# (parallel/CMakeLists.txt). FASTSLAM_X86_64 says whether those copies exist.
+set(FASTSLAM_X86_64 OFF)
+if(CMAKE_SYSTEM_PROCESSOR MATCHES "^(x86_64|AMD64|amd64)$")
+  set(FASTSLAM_X86_64 ON)
+endif()
+if(FASTSLAM_PORTABLE)
+  string(TOUPPER "${CMAKE_BUILD_TYPE}" _fastslam_type)
+  foreach(_fastslam_flags CMAKE_CXX_FLAGS CMAKE_CXX_FLAGS_${_fastslam_type})
+    if(" ${${_fastslam_flags}} " MATCHES " -(march|mtune|mcpu)=|native| -m(avx|fma|sse|bmi)")
+      message(FATAL_ERROR "FASTSLAM_PORTABLE: ${_fastslam_flags} ('${${_fastslam_flags}}') "
+        "chooses an instruction set; remove it (the package preset's flags are -O3 -DNDEBUG) and "
+        "set FASTSLAM_PORTABLE_ARCH instead")
+    endif()
+  endforeach()
+  if(FASTSLAM_X86_64)
+    add_compile_options(-march=${FASTSLAM_PORTABLE_ARCH})
+  endif()
+endif()
+
 add_library(fastslam_sanitize INTERFACE)
 if(FASTSLAM_SANITIZE)
   list(JOIN FASTSLAM_SANITIZE "," _fastslam_san)
@@ -24,6 +46,15 @@ endif()
 
 # fastslam_library(NAME SOURCES ... DEPS ...): the library of one source folder, exported as
 # fastslam::NAME; includes are by path from the repository root ("memory/landmark_tree.h").
+# Installed, the headers sit in include/fastslam/<folder>/ (cmake/FastslamInstall.cmake) and
+# consumers write <fastslam/engine/filter.h>, which needs include/ on their path. The headers
+# include one another as the sources do, by path from the root ("engine/filter_config.h"),
+# which needs include/fastslam too: both are exported, and the installed headers are the
+# sources unchanged (rewriting their includes at install time would make the installed text
+# differ from the tested one). The cost: memory/, parallel/ and engine/ are top-level names on
+# a consumer's include path (as -isystem, searched after its own -I directories), so a header
+# of the consumer's at the same relative path as one of ours (engine/pose.h in one of its -I
+# directories) would be found first, by our headers too. Consumers spell ours fastslam/....
 function(fastslam_library name)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
   add_library(fastslam_${name} ${ARG_SOURCES})
@@ -31,6 +62,7 @@ function(fastslam_library name)
   set_target_properties(fastslam_${name} PROPERTIES EXPORT_NAME ${name} OUTPUT_NAME fastslam_${name})
   target_include_directories(fastslam_${name} PUBLIC
     $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>
+    $<INSTALL_INTERFACE:include>
     $<INSTALL_INTERFACE:include/fastslam>)
   target_link_libraries(fastslam_${name} PUBLIC ${ARG_DEPS}
     PRIVATE $<BUILD_INTERFACE:fastslam_warnings> $<BUILD_INTERFACE:fastslam_sanitize>)

@@ -16,6 +16,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string_view>
 
 #include "parallel/internal/philox.h"
 
@@ -139,5 +140,14 @@ void normal_pairs_for_particles(std::uint64_t seed, std::span<const std::uint64_
 void uniforms_for_particles(std::uint64_t seed, std::uint64_t step, Purpose purpose,
                             std::uint32_t first_particle, std::size_t count,
                             std::size_t per_particle, std::span<double> out) noexcept;
+
+// The instruction set the batch functions (and fill_uniform, fill_normal) run on in this
+// process. A portable build (FASTSLAM_PORTABLE, README.md) has "baseline", "avx2" (x86-64-v3)
+// and "avx512" (x86-64-v4) kernels and uses the best this CPU runs, or the one the environment
+// variable FASTSLAM_ISA names (read once, at the first batch call; a name it cannot honour is
+// reported on stderr and the best is used); all give the same values. Other builds have one,
+// "native", compiled for the build's own flags, and ignore FASTSLAM_ISA.
+// Thread-safe; the first call reads the CPU's features, later calls are O(1).
+std::string_view random_stream_isa() noexcept;
 
 }  // namespace fastslam::parallel

@@ -3,7 +3,9 @@
 // counter and a 64-bit key. Four forms, bit-identical by construction (random_stream_test
 // checks Random123's known answers): philox4x32_10 (one block, constexpr),
 // philox4x32_10_lanes<L> (plain loops that vectorise), philox4x32_10_words (one block inline in
-// a caller's loop), philox4x32_10_simd<L> (explicit AVX-512 / AVX2 multiplies).
+// a caller's loop), philox4x32_10_simd<L> (explicit AVX-512 / AVX2 multiplies). What the
+// kernels call is always inlined: random_kernels.cc is compiled once per instruction set, and an
+// out-of-line copy from its AVX-512 compilation could be the one the linker keeps for all.
 // Thread safety: pure functions. Costs: O(1) per block, no allocation.
 #pragma once
 
@@ -46,7 +48,7 @@ struct PhiloxRoundKeys {
   std::uint64_t k0[kPhiloxRounds];
   std::uint64_t k1[kPhiloxRounds];
 };
-constexpr PhiloxRoundKeys philox_round_keys(PhiloxKey key) noexcept {
+[[gnu::always_inline]] constexpr PhiloxRoundKeys philox_round_keys(PhiloxKey key) noexcept {
   PhiloxRoundKeys keys{};
   for (int round = 0; round < kPhiloxRounds; ++round) {
     keys.k0[round] = key[0];
@@ -219,8 +221,9 @@ struct PhiloxLanes {
 // words 2 and 3 are `c2`, `c3` in every lane. On exit lanes holds the L output blocks:
 // lanes.x<w>[l] == philox4x32_10({x0[l], x1[l], c2, c3}, key)[w].
 template <std::size_t L>
-inline void philox4x32_10_lanes(PhiloxKey key, std::uint32_t c2, std::uint32_t c3,
-                                PhiloxLanes<L>& lanes) noexcept {
+[[gnu::always_inline]] inline void philox4x32_10_lanes(PhiloxKey key, std::uint32_t c2,
+                                                       std::uint32_t c3,
+                                                       PhiloxLanes<L>& lanes) noexcept {
   constexpr std::uint64_t kLow = 0xFFFFFFFFu;
   for (std::size_t l = 0; l < L; ++l) {
     lanes.x2[l] = c2;

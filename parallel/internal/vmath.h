@@ -1,11 +1,12 @@
-// Vectorisable log, sin, cos and atan2 for the batch kernels (random_stream.cc,
+// Vectorisable log, sin, cos and atan2 for the batch kernels (random_kernels.cc,
 // engine/motion_batch.h, engine/landmark_batch.cc); not API. Plain inline IEEE-754 arithmetic
 // with every multiply-add an explicit `madd`, so loops over lanes vectorise and scalar and
-// vector forms give the same bits; results never depend on the C library (only on whether the
-// target has a fast fma). Error bounds (asserted by tests/parallel/internal/vmath_test.cc):
+// vector forms give the same bits; results never depend on the C library, only on whether
+// `madd` fuses (where the target has a fast fma, unless FASTSLAM_VMATH_NO_FMA).
+// Error bounds (asserted by tests/parallel/internal/vmath_test.cc):
 //   log_positive(x)   positive normal x: 1 ulp.
 //   sincos_turns(t)   cos and sin of 2 pi t 2^-53, integer t in [0, 2^53): 1.5 * 2^-53
-//                     absolute, exact quadrant.
+//                     absolute where madd fuses, 2 * 2^-53 where it does not; exact quadrant.
 //   sincos(x)         |x| <= kSinCosMaxArg = 2^20: 2^-52 absolute; beyond, finite but
 //                     meaningless (callers test sincos_in_domain and fall back to libm).
 //   sincos_small(x)   |x| <= kSinCosSmallArg: the bits of sincos(x), without range reduction.
@@ -22,11 +23,18 @@
 
 namespace fastslam::parallel::internal {
 
-#if defined(FP_FAST_FMA)
+// a * b + c: one fma (one rounding) where the target has a fast one, else a multiply and an add.
+// FASTSLAM_VMATH_NO_FMA keeps the two roundings on every target: a portable build defines it,
+// with -ffp-contract=off, for the random-stream kernels it compiles once per instruction set
+// (parallel/CMakeLists.txt), so that the AVX-512 copy, whose instruction set has fma, gives the
+// bits of the baseline one, which has none.
+#if defined(FP_FAST_FMA) && !defined(FASTSLAM_VMATH_NO_FMA)
+inline constexpr bool kMaddFuses = true;
 [[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
   return std::fma(a, b, c);
 }
 #else
+inline constexpr bool kMaddFuses = false;
 [[gnu::always_inline]] inline double madd(double a, double b, double c) noexcept {
   return a * b + c;
 }
@@ -126,8 +134,8 @@ inline constexpr std::array<double, 8> kCosPoly = taylor(0);
 }  // namespace vmath_detail
 
 // cos(2 pi t) and sin(2 pi t) for t = turns * 2^-53, turns an integer in [0, 2^53); absolute
-// error within 1.5 * 2^-53 (tested). The quadrant comes from rounding 4t, which is exact, so
-// there is no argument-reduction error.
+// error within 1.5 * 2^-53, or 2 * 2^-53 where madd does not fuse (tested). The quadrant comes
+// from rounding 4t, which is exact, so there is no argument-reduction error.
 [[gnu::always_inline]] inline void sincos_turns(double turns, double& cos_out,
                                                 double& sin_out) noexcept {
   constexpr double kShift = 0x1.8p52;  // adding it rounds [0, 2^51) to an integer

@@ -1,27 +1,193 @@
-# cmake -P script: install BUILD_DIR to WORK_DIR/prefix, build CONSUMER_DIR against it, run it.
-file(REMOVE_RECURSE "${WORK_DIR}")
+# cmake -P script behind the install_find_package test (tests/install/CMakeLists.txt).
+#  1. Builds the package as the `package` preset does (FASTSLAM_PORTABLE, libraries only) from
+#     SOURCE_DIR in WORK_DIR/package, and checks its compile lines: no -march=native, and on
+#     x86-64 every file compiled for the baseline, only the kernel copies for more.
+#  2. Installs it to WORK_DIR/a and checks the tree: the three libraries, headers only under
+#     include/fastslam/{memory,parallel,engine}/ and none of engine/internal/, no instruction-set
+#     flag and no absolute path (of the prefix, the sources or the build) in any package file;
+#     on x86-64, no AVX instruction in the libraries outside the dispatched copies (check_isa.py).
+#  3. Moves the prefix to WORK_DIR/b, then builds against b only: every installed header on its
+#     own (tests/install/headers) and each consumer.
+#  4. Runs each consumer everywhere (run_everywhere): on this CPU with its best random-stream
+#     kernels and with each copy forced by FASTSLAM_ISA, and under qemu-user on x86-64 hosts on
+#     emulated CPUs: qemu64 (the x86-64 baseline: no SSE4, no AVX) must run the baseline copy
+#     and Haswell (AVX2, no AVX-512) the avx2 copy. A consumer prints its kernels ("isa: ...")
+#     and a digest of the bits it computed ("digest: ..."), which must be the same in every run.
+# Inputs: SOURCE_DIR, WORK_DIR, CONSUMER_DIR, HEADERS_DIR, CXX_COMPILER, COMPILER_LAUNCHER
+# (may be empty), OBJDUMP, X86_64 (ON/OFF). Builds use 2 jobs unless CMAKE_BUILD_PARALLEL_LEVEL
+# is set.
+cmake_minimum_required(VERSION 3.25)
+
+set(package_build "${WORK_DIR}/package")
+set(prefix_a "${WORK_DIR}/a")
+set(prefix_b "${WORK_DIR}/b")
+file(REMOVE_RECURSE "${prefix_a}" "${prefix_b}" "${WORK_DIR}/headers" "${WORK_DIR}/consumer")
+set(parallel --parallel 2)
+if(DEFINED ENV{CMAKE_BUILD_PARALLEL_LEVEL})
+  set(parallel)
+endif()
+set(launcher)
+if(COMPILER_LAUNCHER)
+  set(launcher "-DCMAKE_CXX_COMPILER_LAUNCHER=${COMPILER_LAUNCHER}")
+endif()
+
+# run(COMMAND...): runs it, stops the test with its output if it fails; the output goes to
+# `run_output` in the caller.
 function(run)
-  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE out)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
   if(NOT rc EQUAL 0)
-    message(FATAL_ERROR "failed (${rc}): ${ARGN}\n${out}")
+    message(FATAL_ERROR "failed (${rc}): ${ARGN}\n${out}\n${err}")
   endif()
-  message(STATUS "${out}")
+  set(run_output "${out}" PARENT_SCOPE)
 endfunction()
-run(${CMAKE_COMMAND} --install "${BUILD_DIR}" --prefix "${WORK_DIR}/prefix")
-if(NOT EXISTS "${WORK_DIR}/prefix/lib/cmake/fastslam/fastslamConfig.cmake")
-  message(FATAL_ERROR "fastslamConfig.cmake was not installed")
-endif()
-# The command line's parts (tools/) are not the package's API: no headers, no libraries.
-if(EXISTS "${WORK_DIR}/prefix/include/fastslam/tools")
-  message(FATAL_ERROR "tools/ headers were installed")
-endif()
-file(GLOB _tool_libraries "${WORK_DIR}/prefix/lib/libfastslam_*")
-foreach(_library ${_tool_libraries})
-  if(NOT _library MATCHES "libfastslam_(memory|parallel|engine)\\.")
-    message(FATAL_ERROR "a tools library was installed: ${_library}")
+
+# --- 1. The package build --------------------------------------------------------------------
+string(TIMESTAMP start "%s")
+run(${CMAKE_COMMAND} -S "${SOURCE_DIR}" -B "${package_build}" --preset package
+    "-DCMAKE_CXX_COMPILER=${CXX_COMPILER}" ${launcher})
+run(${CMAKE_COMMAND} --build "${package_build}" ${parallel})
+file(STRINGS "${package_build}/compile_commands.json" commands REGEX "\"command\":")
+foreach(command IN LISTS commands)
+  if(command MATCHES "-m(arch|tune)=native")
+    message(FATAL_ERROR "the package build compiles with -march=native: ${command}")
+  endif()
+  if(X86_64 AND NOT command MATCHES " -march=x86-64 ")
+    message(FATAL_ERROR "not compiled for the x86-64 baseline: ${command}")
+  endif()
+  if(command MATCHES " -march=x86-64-v[234]" AND NOT command MATCHES "random_kernels\.cc")
+    message(FATAL_ERROR "compiled beyond the baseline outside the kernel copies: ${command}")
   endif()
 endforeach()
-run(${CMAKE_COMMAND} -S "${CONSUMER_DIR}" -B "${WORK_DIR}/build" -G Ninja
-    -DCMAKE_BUILD_TYPE=Release "-DCMAKE_PREFIX_PATH=${WORK_DIR}/prefix")
-run(${CMAKE_COMMAND} --build "${WORK_DIR}/build")
-run("${WORK_DIR}/build/consumer")
+string(TIMESTAMP now "%s")
+math(EXPR seconds "${now} - ${start}")
+message(STATUS "package built in ${seconds} s")
+
+# --- 2. Install and check the tree -----------------------------------------------------------
+run(${CMAKE_COMMAND} --install "${package_build}" --prefix "${prefix_a}")
+if(NOT EXISTS "${prefix_a}/lib/cmake/fastslam/fastslamConfig.cmake")
+  message(FATAL_ERROR "fastslamConfig.cmake was not installed")
+endif()
+file(GLOB_RECURSE installed RELATIVE "${prefix_a}" "${prefix_a}/*")
+set(headers 0)
+foreach(file IN LISTS installed)
+  if(file MATCHES "^include/")
+    if(NOT file MATCHES "^include/fastslam/(memory|parallel|engine)/[^ ]*\\.h$"
+       OR file MATCHES "^include/fastslam/engine/internal/")
+      message(FATAL_ERROR "not a public header of the package: ${file}")
+    endif()
+    math(EXPR headers "${headers} + 1")
+  elseif(file MATCHES "^lib/cmake/fastslam/")
+    file(READ "${prefix_a}/${file}" text)
+    if(text MATCHES "-m(arch|tune|avx|fma|sse)")
+      message(FATAL_ERROR "${file} passes an instruction-set flag to consumers")
+    endif()
+  elseif(NOT file MATCHES "^lib/libfastslam_(memory|parallel|engine)\\.a$")
+    message(FATAL_ERROR "not part of the package: ${file}")  # tools/, executables, ...
+  endif()
+  if(file MATCHES "\\.(h|cmake)$")
+    file(READ "${prefix_a}/${file}" text)
+    foreach(path "${prefix_a}" "${SOURCE_DIR}" "${WORK_DIR}")
+      string(FIND "${text}" "${path}" at)
+      if(NOT at EQUAL -1)
+        message(FATAL_ERROR "${file} names ${path}: the package would not survive a move")
+      endif()
+    endforeach()
+  endif()
+endforeach()
+message(STATUS "installed ${headers} headers and the three libraries")
+if(X86_64)
+  file(GLOB libraries "${prefix_a}/lib/libfastslam_*.a")
+  run(/usr/bin/python3 "${CMAKE_CURRENT_LIST_DIR}/check_isa.py" "${OBJDUMP}" ${libraries})
+  message(STATUS "${run_output}")
+endif()
+
+# --- 3. Move the prefix; build the headers against it ----------------------------------------
+file(RENAME "${prefix_a}" "${prefix_b}")
+run(${CMAKE_COMMAND} -S "${HEADERS_DIR}" -B "${WORK_DIR}/headers" -G Ninja
+    -DCMAKE_BUILD_TYPE=Release "-DCMAKE_PREFIX_PATH=${prefix_b}"
+    "-DCMAKE_CXX_COMPILER=${CXX_COMPILER}" ${launcher})
+run(${CMAKE_COMMAND} --build "${WORK_DIR}/headers" ${parallel})
+message(STATUS "every public header compiles on its own against the moved prefix")
+
+# --- 4. Consumers, run everywhere ------------------------------------------------------------
+find_program(qemu qemu-x86_64)
+if(X86_64 AND NOT qemu)
+  message(FATAL_ERROR "qemu-x86_64 (Debian package qemu-user, which tools/lib/setup.sh "
+    "installs) is needed to run the consumer on CPUs without AVX")
+endif()
+
+# The copies in a portable x86-64 build, least capable first.
+set(copies baseline)
+if(X86_64)
+  set(copies baseline avx2 avx512)
+endif()
+
+# run_one(NAME LABEL EXPECTED_ISA COMMAND...): runs it; checks that it reports EXPECTED_ISA
+# (unless empty) and prints the digest of NAME's first run; sets `isa` in the caller.
+function(run_one name label expected)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "${name} (${label}) failed (${rc}):\n${out}\n${err}")
+  endif()
+  if(NOT out MATCHES "isa: ([a-z0-9]+)")
+    message(FATAL_ERROR "${name} (${label}) printed no isa:\n${out}")
+  endif()
+  set(got "${CMAKE_MATCH_1}")
+  if(NOT out MATCHES "digest: ([0-9a-f]+)")
+    message(FATAL_ERROR "${name} (${label}) printed no digest:\n${out}")
+  endif()
+  set(digest "${CMAKE_MATCH_1}")
+  if(expected AND NOT got STREQUAL expected)
+    message(FATAL_ERROR "${name} (${label}) ran the ${got} kernels, not ${expected}:\n${err}")
+  endif()
+  get_property(reference GLOBAL PROPERTY fastslam_digest_${name})
+  if(NOT reference)
+    set_property(GLOBAL PROPERTY fastslam_digest_${name} "${digest}")
+  elseif(NOT digest STREQUAL reference)
+    message(FATAL_ERROR "${name} (${label}, ${got} kernels): digest ${digest}, but ${reference} "
+      "in its first run: the kernel copies or CPUs do not give the same bits")
+  endif()
+  message(STATUS "${name} ${label}: ${got} kernels, digest ${digest}")
+  set(isa "${got}" PARENT_SCOPE)
+endfunction()
+
+# run_everywhere(NAME COMMAND...): see 4. above. A forced copy this CPU lacks must fall back to
+# its best one (with a warning).
+function(run_everywhere name)
+  run_one(${name} "this CPU" "" ${CMAKE_COMMAND} -E env --unset=FASTSLAM_ISA ${ARGN})
+  set(best "${isa}")
+  list(FIND copies "${best}" best_index)
+  foreach(copy IN LISTS copies)
+    list(FIND copies "${copy}" index)
+    set(expected "${copy}")
+    if(index GREATER best_index)
+      set(expected "${best}")
+    endif()
+    run_one(${name} "FASTSLAM_ISA=${copy}" "${expected}"
+            ${CMAKE_COMMAND} -E env FASTSLAM_ISA=${copy} ${ARGN})
+  endforeach()
+  if(X86_64)
+    run_one(${name} "qemu -cpu qemu64" baseline
+            ${CMAKE_COMMAND} -E env --unset=FASTSLAM_ISA ${qemu} -cpu qemu64 ${ARGN})
+    run_one(${name} "qemu -cpu Haswell" avx2
+            ${CMAKE_COMMAND} -E env --unset=FASTSLAM_ISA ${qemu} -cpu Haswell ${ARGN})
+  endif()
+endfunction()
+
+# The C++ consumer: find_package(fastslam), #include <fastslam/...>.
+run(${CMAKE_COMMAND} -S "${CONSUMER_DIR}" -B "${WORK_DIR}/consumer" -G Ninja
+    -DCMAKE_BUILD_TYPE=Release "-DCMAKE_PREFIX_PATH=${prefix_b}"
+    "-DCMAKE_CXX_COMPILER=${CXX_COMPILER}" ${launcher})
+run(${CMAKE_COMMAND} --build "${WORK_DIR}/consumer" ${parallel})
+run_everywhere(consumer "${WORK_DIR}/consumer/consumer")
+
+# The C consumer (to come): a C project built the same way against ${prefix_b}, run with
+# run_everywhere(c_consumer ...); its digest must equal the C++ consumer's if it computes the
+# same draws.
+
+# The Python import (to come): import the installed module from ${prefix_b} and run it with
+# run_everywhere(python_import /usr/bin/python3 ...).
+
+string(TIMESTAMP now "%s")
+math(EXPR seconds "${now} - ${start}")
+message(STATUS "install test done in ${seconds} s")

@@ -3,7 +3,7 @@
 # and sets up ccache so rebuilds, including CI's fresh clones, reuse earlier compilations.
 
 FASTSLAM_PACKAGES=(
-  cmake ninja-build g++ pkg-config ccache git
+  cmake ninja-build g++ pkg-config ccache git qemu-user
   libtbb-dev libeigen3-dev libjemalloc-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libnanoflann-dev
@@ -42,16 +42,22 @@ fastslam_setup_ccache() {
   export CCACHE_MAXSIZE="${CCACHE_MAXSIZE:-5G}"
 }
 
-# fastslam_build PRESET: configure and build one CMake preset.
+# fastslam_build PRESET [TARGET...]: configure one CMake preset and build it (only the TARGETs
+# when given).
 fastslam_build() {
   local preset=$1
+  shift
+  local targets=()
+  if [ $# -gt 0 ]; then
+    targets=(--target "$@")
+  fi
   echo "== Configuring and building preset '$preset'"
   cmake --preset "$preset" >"$FASTSLAM_ROOT/build/configure-$preset.log" 2>&1 || {
     cat "$FASTSLAM_ROOT/build/configure-$preset.log" >&2
     return 1
   }
   local log="$FASTSLAM_ROOT/build/build-$preset.log"
-  if ! cmake --build --preset "$preset" -- -j"$(nproc)" >"$log" 2>&1; then
+  if ! cmake --build --preset "$preset" "${targets[@]}" -- -j"$(nproc)" >"$log" 2>&1; then
     grep -v -E '^\[[0-9]+/[0-9]+\] (Building|Linking)' "$log" | tail -n 200 >&2
     return 1
   fi

