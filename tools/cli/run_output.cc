@@ -94,7 +94,7 @@ void write_run_files(const std::string& dir, const RunFiles& files) {
     write_true_landmarks_csv(file, files.true_landmarks);
     written += ",true_landmarks.csv";
   }
-  std::printf("  wrote %s/{%s}\n", dir.c_str(), written.c_str());
+  if (!files.quiet) std::printf("  wrote %s/{%s}\n", dir.c_str(), written.c_str());
 }
 
 void draw_map(const std::string& script, const std::string& dir) {
