@@ -22,10 +22,12 @@ if(FASTSLAM_SANITIZE)
   target_link_options(fastslam_sanitize INTERFACE -fsanitize=${_fastslam_san})
 endif()
 
-# fastslam_library(NAME SOURCES ... DEPS ...): the library of one source folder, exported as
-# fastslam::NAME; includes are by path from the repository root ("memory/landmark_tree.h").
+# fastslam_library(NAME [NO_INSTALL] SOURCES ... DEPS ...): the library of one source folder,
+# fastslam::NAME, installed and exported unless NO_INSTALL (a part of the build only, as the
+# bindings' shared code); includes are by path from the repository root
+# ("memory/landmark_tree.h").
 function(fastslam_library name)
-  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  cmake_parse_arguments(ARG "NO_INSTALL" "" "SOURCES;DEPS" ${ARGN})
   add_library(fastslam_${name} ${ARG_SOURCES})
   add_library(fastslam::${name} ALIAS fastslam_${name})
   set_target_properties(fastslam_${name} PROPERTIES EXPORT_NAME ${name} OUTPUT_NAME fastslam_${name})
@@ -35,7 +37,9 @@ function(fastslam_library name)
   target_link_libraries(fastslam_${name} PUBLIC ${ARG_DEPS}
     PRIVATE $<BUILD_INTERFACE:fastslam_warnings> $<BUILD_INTERFACE:fastslam_sanitize>)
   target_compile_features(fastslam_${name} PUBLIC cxx_std_20)
-  set_property(GLOBAL APPEND PROPERTY FASTSLAM_LIBRARIES fastslam_${name})
+  if(NOT ARG_NO_INSTALL)
+    set_property(GLOBAL APPEND PROPERTY FASTSLAM_LIBRARIES fastslam_${name})
+  endif()
 endfunction()
 
 # Every executable we ship (CLI, tests, benchmarks) gets jemalloc as its malloc, unless a
