@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -157,19 +158,23 @@ def test_threads(config, log):
 
 
 def test_gil_released(loop_log):
-    """Python code runs while a run works in another thread."""
-    done = threading.Event()
-    result = {}
+    """Python code runs while a run works in another thread: the main thread keeps waking up
+    (time.sleep needs the GIL to return) between the moments the run starts and ends."""
+    window = {}
 
     def work():
-        result["metrics"] = fastslam.run(loop_log, particles=300, threads=1)
-        done.set()
+        window["start"] = time.perf_counter()
+        window["metrics"] = fastslam.run(loop_log, particles=400, threads=1)
+        window["end"] = time.perf_counter()
 
     thread = threading.Thread(target=work)
+    ticks = []
     thread.start()
-    ticks = 0
-    while not done.is_set():
-        ticks += 1
+    while thread.is_alive():
+        time.sleep(0.001)
+        ticks.append(time.perf_counter())
     thread.join()
-    assert result["metrics"]
-    assert ticks > 1000
+    assert window["metrics"]["particles"] == 400
+    inside = [t for t in ticks if window["start"] < t < window["end"]]
+    assert window["end"] - window["start"] > 0.02
+    assert len(inside) >= 5, (len(inside), window["end"] - window["start"])
