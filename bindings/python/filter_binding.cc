@@ -63,11 +63,11 @@ class PyFilter {
 // fastslam.Estimate: engine::Estimate as numbers and numpy arrays.
 struct PyEstimate {
   double time = 0.0;
-  py::array_t<double> mean_pose, covariance, best_pose;
+  // Plain py::array members (array_t<Record> behind them): help() shows "numpy.ndarray".
+  py::array mean_pose, covariance, best_pose;
   std::uint32_t best_particle = 0;
   double effective_sample_size = 0.0;
-  py::array_t<AssociationRecord> associations;
-  py::array_t<MapRecord> map;
+  py::array associations, map;
 };
 
 py::array_t<double> copy_array(const double* values, std::vector<py::ssize_t> shape) {
@@ -93,12 +93,12 @@ PyEstimate to_python(const engine::Estimate& e) {
   out.best_pose = copy_array(e.best_pose, {5});
   out.best_particle = e.best_particle;
   out.effective_sample_size = e.effective_sample_size;
-  out.associations =
-      py::array_t<AssociationRecord>(static_cast<py::ssize_t>(e.associations.size()));
-  AssociationRecord* row = out.associations.mutable_data();
+  py::array_t<AssociationRecord> associations(static_cast<py::ssize_t>(e.associations.size()));
+  AssociationRecord* row = associations.mutable_data();
   for (const engine::ObservationAssociation& a : e.associations) {
     *row++ = {a.observation, static_cast<std::uint32_t>(a.outcome), a.landmark_id, a.mahalanobis2};
   }
+  out.associations = std::move(associations);
   out.map = map_array(e.map);
   return out;
 }
@@ -281,12 +281,13 @@ std::unique_ptr<PyFilter> from_bytes(const py::buffer& data) {
 }
 
 std::string repr(const PyEstimate& e) {
+  const auto* pose = static_cast<const double*>(e.mean_pose.data());
   char text[256];
   std::snprintf(text, sizeof(text),
                 "fastslam.Estimate(time=%g, mean_pose=[%g, %g, %g], best_particle=%u, "
                 "effective_sample_size=%g, associations=%zd, map=%zd landmarks)",
-                e.time, e.mean_pose.at(0), e.mean_pose.at(1), e.mean_pose.at(2), e.best_particle,
-                e.effective_sample_size, e.associations.size(), e.map.size());
+                e.time, pose[0], pose[1], pose[2], e.best_particle, e.effective_sample_size,
+                e.associations.size(), e.map.size());
   return text;
 }
 
@@ -394,7 +395,8 @@ association, mismatched lengths or t going backwards.)doc")
       .def(
           "map",
           [](PyFilter& self) {
-            return map_array(self.call([](engine::Filter& f) { return f.estimate().map; }));
+            return py::array(
+                map_array(self.call([](engine::Filter& f) { return f.estimate().map; })));
           },
           "The best particle's map as a structured array (fastslam.MAP_DTYPE: id, x, y, sxx, "
           "sxy, syy, log_odds, last_seen), in slot order. O(M + N).")
@@ -414,7 +416,7 @@ association, mismatched lengths or t going backwards.)doc")
             py::array_t<TrajectoryRecord> out(static_cast<py::ssize_t>(points.size()));
             TrajectoryRecord* row = out.mutable_data();
             for (const engine::TrajectoryPoint& p : points) *row++ = {p.control, p.x, p.y, p.theta};
-            return out;
+            return py::array(std::move(out));
           },
           "The weighted-mean pose after every control since the last call, as a structured "
           "array (control, x, y, theta); empty unless the config has record_trajectory.")
@@ -432,7 +434,7 @@ association, mismatched lengths or t going backwards.)doc")
             });
             py::array_t<ParticleRecord> out(static_cast<py::ssize_t>(rows.size()));
             std::copy(rows.begin(), rows.end(), out.mutable_data());
-            return out;
+            return py::array(std::move(out));
           },
           "The particles, after draining the queue, as a structured array "
           "(fastslam.PARTICLE_DTYPE: x, y, theta, log_weight, landmarks). O(M).")

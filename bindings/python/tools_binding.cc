@@ -84,43 +84,46 @@ tools::RunOptions run_options(const char* function, const py::object& log_path,
 
 py::dict to_dict(const nlohmann::json& j) { return from_json(j).cast<py::dict>(); }
 
+// fastslam.Log. Plain py::array members (array_t<Record> behind them): help() shows
+// "numpy.ndarray".
 struct PyLog {
   double start_time = 0.0;
-  py::array_t<double> start_pose;
+  py::array start_pose;
   std::string motion;
   py::dict config;
-  py::array_t<EventRecord> events;
-  py::array_t<ObservationRecord> observations;
-  py::array_t<TruthRecord> landmarks;
+  py::array events, observations, landmarks;
 };
 
 PyLog to_python(const tools::Log& log) {
   PyLog out;
   out.start_time = log.header.start_time;
-  out.start_pose = py::array_t<double>(3);
-  std::copy_n(log.header.start_pose, 3, out.start_pose.mutable_data());
+  py::array_t<double> start(3);
+  std::copy_n(log.header.start_pose, 3, start.mutable_data());
+  out.start_pose = std::move(start);
   out.motion = std::string(engine::to_string(log.header.motion.kind));
   engine::FilterConfig config;
   config.motion = log.header.motion;
   config.sensor = log.header.sensor;
   for (int k = 0; k < 3; ++k) config.initial_pose[k] = log.header.start_pose[k];
   out.config = to_dict(nlohmann::json::parse(config_to_json(config)));
-  out.events = py::array_t<EventRecord>(static_cast<py::ssize_t>(log.events.size()));
-  EventRecord* e = out.events.mutable_data();
-  for (const tools::Event& event : log.events) {
-    *e++ = {event.time,       static_cast<std::uint32_t>(event.kind),
-            event.count,      event.first,
-            event.dt,         event.control.u0,
-            event.control.u1, event.x,
-            event.y,          event.theta};
+  py::array_t<EventRecord> events(static_cast<py::ssize_t>(log.events.size()));
+  EventRecord* e = events.mutable_data();
+  for (const tools::Event& v : log.events) {
+    *e++ = {v.time,       static_cast<std::uint32_t>(v.kind),
+            v.count,      v.first,
+            v.dt,         v.control.u0,
+            v.control.u1, v.x,
+            v.y,          v.theta};
   }
-  out.observations =
-      py::array_t<ObservationRecord>(static_cast<py::ssize_t>(log.observations.size()));
-  ObservationRecord* z = out.observations.mutable_data();
+  out.events = std::move(events);
+  py::array_t<ObservationRecord> observations(static_cast<py::ssize_t>(log.observations.size()));
+  ObservationRecord* z = observations.mutable_data();
   for (const engine::Observation& o : log.observations) *z++ = {o.range, o.bearing, o.id};
-  out.landmarks = py::array_t<TruthRecord>(static_cast<py::ssize_t>(log.landmarks.size()));
-  TruthRecord* l = out.landmarks.mutable_data();
+  out.observations = std::move(observations);
+  py::array_t<TruthRecord> landmarks(static_cast<py::ssize_t>(log.landmarks.size()));
+  TruthRecord* l = landmarks.mutable_data();
   for (const tools::TruthLandmark& t : log.landmarks) *l++ = {t.id, t.x, t.y};
+  out.landmarks = std::move(landmarks);
   return out;
 }
 

@@ -39,3 +39,12 @@ def loop_log(cli, tmp_path_factory) -> pathlib.Path:
     """A loop world of 300 m (landmarks every 10 m, every detection with its id), once round."""
     out = tmp_path_factory.mktemp("logs") / "loop.log"
     return convert(cli, out, "--world", "loop", "--loop-length", "300", "--seed", "7")
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> pathlib.Path:
+    """../shared beside the repository (FASTSLAM_SHARED_DIR under CTest); skips without it."""
+    path = pathlib.Path(os.environ.get("FASTSLAM_SHARED_DIR") or ROOT.parent / "shared")
+    if not (path / "data" / "bailey_sim").is_dir():
+        pytest.skip(f"{path} is absent: this test needs its data sets")
+    return path

@@ -88,3 +88,15 @@ def test_run_writes_files(loop_log, tmp_path):
     assert not (tmp_path / "out" / "map.png").exists()  # no picture unless no_plot=False
     assert json.loads((tmp_path / "out" / "metrics.json").read_text())["particles"] == \
         metrics["particles"]
+
+
+def test_run_without_a_log(shared_dir):
+    """run() on a simulated source: Bailey's web map from ../shared (skipped without it)."""
+    webmap = shared_dir / "data" / "bailey_sim"
+    metrics = fastslam.run(source="sim", landmarks_csv=webmap / "example_webmap_landmarks.csv",
+                           waypoints_csv=webmap / "example_webmap_waypoints.csv",
+                           particles=10, max_steps=3000)
+    assert metrics["steps"] == 3000 and metrics["ended_by"] == "--max-steps"
+    assert metrics["landmarks"] > 0
+    procedural = fastslam.run(source="sim", world="loop", loop_length=300, particles=10)
+    assert procedural["ended_by"] == "end of data" and procedural["landmarks"] > 100
