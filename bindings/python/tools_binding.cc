@@ -2,7 +2,9 @@
 // (tools/cli/run_command.h) and the native log reader (tools/io/log_format.h). Keyword
 // options are the command line's long flags with '_' for '-', parsed by the command line's own
 // option table (tools/cli/command_line.h) so that they check and mean exactly what the flags
-// do. The GIL is released while a run works or a log is read.
+// do. The GIL is released while a run works or a log is read; each call is independent.
+// Costs: a run's; read_log holds the whole log (as tools::Log does) and copies it once into
+// the returned arrays; run_config opens the source (a log is read whole).
 #include <algorithm>
 #include <cstdint>
 #include <filesystem>
