@@ -44,8 +44,10 @@ if(FASTSLAM_SANITIZE)
   target_link_options(fastslam_sanitize INTERFACE -fsanitize=${_fastslam_san})
 endif()
 
-# fastslam_library(NAME SOURCES ... DEPS ...): the library of one source folder, exported as
-# fastslam::NAME; includes are by path from the repository root ("memory/landmark_tree.h").
+# fastslam_library(NAME [NO_INSTALL] SOURCES ... DEPS ...): the library of one source folder,
+# fastslam::NAME, installed and exported unless NO_INSTALL (a part of the build only, as the
+# bindings' shared code); includes are by path from the repository root
+# ("memory/landmark_tree.h").
 # Installed, the headers sit in include/fastslam/<folder>/ (cmake/FastslamInstall.cmake) and
 # consumers write <fastslam/engine/filter.h>, which needs include/ on their path. The headers
 # include one another as the sources do, by path from the root ("engine/filter_config.h"),
@@ -56,7 +58,7 @@ endif()
 # of the consumer's at the same relative path as one of ours (engine/pose.h in one of its -I
 # directories) would be found first, by our headers too. Consumers spell ours fastslam/....
 function(fastslam_library name)
-  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  cmake_parse_arguments(ARG "NO_INSTALL" "" "SOURCES;DEPS" ${ARGN})
   add_library(fastslam_${name} ${ARG_SOURCES})
   add_library(fastslam::${name} ALIAS fastslam_${name})
   set_target_properties(fastslam_${name} PROPERTIES EXPORT_NAME ${name} OUTPUT_NAME fastslam_${name})
@@ -67,7 +69,9 @@ function(fastslam_library name)
   target_link_libraries(fastslam_${name} PUBLIC ${ARG_DEPS}
     PRIVATE $<BUILD_INTERFACE:fastslam_warnings> $<BUILD_INTERFACE:fastslam_sanitize>)
   target_compile_features(fastslam_${name} PUBLIC cxx_std_20)
-  set_property(GLOBAL APPEND PROPERTY FASTSLAM_LIBRARIES fastslam_${name})
+  if(NOT ARG_NO_INSTALL)
+    set_property(GLOBAL APPEND PROPERTY FASTSLAM_LIBRARIES fastslam_${name})
+  endif()
 endfunction()
 
 # Every executable we ship (CLI, tests, benchmarks) gets jemalloc as its malloc, unless a

@@ -233,10 +233,14 @@ void apply_json_config(CLI::App& cmd, const std::string& path) {
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(path + ": not valid JSON: " + e.what());
   }
-  if (!config.is_object()) throw std::runtime_error(path + ": expected one JSON object");
+  apply_json_config(cmd, config, path);
+}
+
+void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::string& where) {
+  if (!config.is_object()) throw std::runtime_error(where + ": expected one JSON object");
   for (const auto& [key, value] : config.items()) {
     auto fail = [&](const std::string& what) {
-      throw std::runtime_error(path + ": key '" + key + "': " + what);
+      throw std::runtime_error(where + ": key '" + key + "': " + what);
     };
     CLI::Option* option = key == "config" ? nullptr : cmd.get_option_no_throw("--" + key);
     if (option == nullptr) fail("unknown option (keys are the long flag names without '--')");

@@ -16,6 +16,7 @@
 #include <string>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json_fwd.hpp>
 
 #include "engine/filter_config.h"
 #include "tools/cli/run_command.h"
@@ -50,6 +51,9 @@ void add_convert_options(CLI::App& cmd, RunOptions& options, RunWords& words);
 // Applies the JSON config file to every option of `cmd` not given on its command line.
 // Throws std::runtime_error "<file>: ..." naming the key on an unknown key or a bad value.
 void apply_json_config(CLI::App& cmd, const std::string& path);
+// The same for a JSON object already in memory (the Python module's keyword arguments);
+// `where` stands for the file in messages.
+void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::string& where);
 
 // After parsing (and the config): the words into enums, the loops default, the noise overrides
 // that were given. Reads `cmd` to see which options were given.

@@ -273,6 +273,17 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
   }
 }
 
+// The options with what the source decides filled in: the association, the match radius and
+// the RPE distance.
+RunOptions resolve_options(const RunOptions& options, const SourceInfo& info,
+                           const AssociationChoice& association) {
+  RunOptions resolved = options;
+  resolved.filter.association = association.engine;
+  resolved.match_radius = options.match_radius.value_or(info.match_radius);
+  resolved.rpe_delta = options.rpe_delta.value_or(info.rpe_delta);
+  return resolved;
+}
+
 // Writes one event of a source to a log.
 void write_event(LogWriter& writer, const Event& e, std::span<const engine::Observation> scan) {
   switch (e.kind) {
@@ -416,10 +427,7 @@ nlohmann::json run_once(const RunOptions& options) {
   const SourceInfo& info = source->info();
   const AssociationChoice association =
       resolve_association(options.association, info, entry.defaults);
-  RunOptions resolved = options;
-  resolved.filter.association = association.engine;
-  resolved.match_radius = options.match_radius.value_or(info.match_radius);
-  resolved.rpe_delta = options.rpe_delta.value_or(info.rpe_delta);
+  const RunOptions resolved = resolve_options(options, info, association);
   const engine::FilterConfig config = filter_config(resolved, info.header);
   const bool ekf = config.algorithm == engine::Algorithm::kEkf;
   const std::uint32_t particles = ekf ? 1 : config.particles;
@@ -456,13 +464,14 @@ nlohmann::json run_once(const RunOptions& options) {
   nlohmann::json metrics = metrics_json(settings, r);
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;
-  print_summary(settings, r, text);
+  if (!options.quiet) print_summary(settings, r, text);
   if (!options.out.empty()) {
     write_run_files(options.out,
                     {.metrics = &metrics,
                      .streamed = r.trajectories.files,
                      .map = r.estimate.map,
-                     .true_landmarks = info.landmarks},
+                     .true_landmarks = info.landmarks,
+                     .quiet = options.quiet},
                     text);
     if (!options.plot_script.empty()) draw_map(options.plot_script, options.out, text);
   }
@@ -474,6 +483,15 @@ nlohmann::json run_once(const RunOptions& options) {
                                                          options.out));
   }
   return metrics;
+}
+
+engine::FilterConfig run_filter_config(const RunOptions& options) {
+  const SourceEntry& entry = find_source(options.source);
+  const std::unique_ptr<Source> source = entry.open(source_options(options));
+  const SourceInfo& info = source->info();
+  const AssociationChoice association =
+      resolve_association(options.association, info, entry.defaults);
+  return filter_config(resolve_options(options, info, association), info.header);
 }
 
 int convert_to_log(const RunOptions& options) {

@@ -117,6 +117,8 @@ struct RunOptions {
   // --no-plot). Empty: no picture. A failing script is reported on stderr and does not fail the
   // run.
   std::string plot_script;
+  // No summary on stdout (the Python module's run(), whose caller reads the metrics).
+  bool quiet = false;
 };
 
 // The plot script `fastslam run` uses by default: $FASTSLAM_PLOT_SCRIPT when set, else this
@@ -148,6 +150,10 @@ engine::MotionKind no_odometry_kind(const std::string& motion);
 int run_simulation(const RunOptions& options);
 // The same, returning the run's metrics.json object.
 nlohmann::json run_once(const RunOptions& options);
+// The filter configuration run_once(options) builds: the source opened for its header and its
+// recommendations, the association resolved. For replaying a source through a Filter of one's
+// own (the Python module). Costs: opening the source (a log is read whole).
+engine::FilterConfig run_filter_config(const RunOptions& options);
 
 // `fastslam convert`: writes any source's events, header and true landmarks (a simulated
 // source passes its false alarms on) as a native log to the file `options.out`, which appears

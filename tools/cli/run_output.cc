@@ -95,7 +95,7 @@ void write_run_files(const std::string& dir, const RunFiles& files, std::FILE* o
     write_true_landmarks_csv(file, files.true_landmarks);
     written += ",true_landmarks.csv";
   }
-  std::fprintf(out, "  wrote %s/{%s}\n", dir.c_str(), written.c_str());
+  if (!files.quiet) std::fprintf(out, "  wrote %s/{%s}\n", dir.c_str(), written.c_str());
 }
 
 void draw_map(const std::string& script, const std::string& dir, std::FILE* out) {

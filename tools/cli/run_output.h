@@ -52,10 +52,11 @@ struct RunFiles {
   std::span<const std::string> streamed;  // already in the directory, for the list
   std::span<const engine::MapLandmark> map;
   std::span<const TruthLandmark> true_landmarks;
+  bool quiet = false;  // no list on stdout
 };
 
 // Creates `dir` and writes the files (true_landmarks.csv only when there are some); prints the
-// list of every file of the run.
+// list of every file of the run unless `quiet`.
 // Throws std::runtime_error naming a file that cannot be written.
 void write_run_files(const std::string& dir, const RunFiles& files, std::FILE* out = stdout);
 

@@ -8,6 +8,7 @@ FASTSLAM_PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libnanoflann-dev
   python3 python3-numpy python3-matplotlib
+  python3-dev pybind11-dev python3-pytest
 )
 
 fastslam_install_packages() {

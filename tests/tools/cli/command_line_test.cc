@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 namespace fastslam::tools {
 namespace {
@@ -141,6 +142,37 @@ TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
   EXPECT_NE(e.find(": expected one JSON object"), std::string::npos) << e;
   e = error_of(R"({"particles": 10,)");
   EXPECT_NE(e.find(": not valid JSON"), std::string::npos) << e;
+}
+
+// The Python module's keyword arguments: a JSON object in memory, read as a config file is.
+TEST_F(CommandLine, AJsonObjectInMemoryActsAsAConfigFile) {
+  CLI::App app;
+  RunOptions o;
+  RunWords w;
+  add_run_options(app, o, w);
+  app.parse("--seed 4", false);
+  apply_json_config(app,
+                    nlohmann::json{{"particles", 12},
+                                   {"seed", 9},
+                                   {"no-plot", true},
+                                   {"no-progress", false},
+                                   {"sigma-range", 0.5}},
+                    "fastslam.run");
+  finish_run_options(app, w, o);
+  EXPECT_EQ(o.filter.particles, 12u);
+  EXPECT_EQ(o.filter.seed, 4u);  // given on the command line: it wins
+  EXPECT_TRUE(o.plot_script.empty());
+  EXPECT_TRUE(o.progress);
+  ASSERT_TRUE(o.model.sigma_range.has_value());
+  EXPECT_EQ(*o.model.sigma_range, 0.5);
+  try {
+    apply_json_config(app, nlohmann::json{{"partcles", 5}}, "fastslam.run");
+    ADD_FAILURE() << "an unknown key was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("fastslam.run: key 'partcles': unknown option"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // The simulator's true noises and the trace are plain options; the filter's noise overrides stay

@@ -280,6 +280,45 @@ TEST(RunCommand, LogRoundTripGivesTheDirectRunsMetrics) {
   }
 }
 
+// run_filter_config is the configuration the run builds: the log header's models, the
+// options', the association resolved, the trajectory recorded; a quiet run prints nothing.
+TEST(RunCommand, RunFilterConfigIsTheRunsConfigAndQuietRunsPrintNothing) {
+  RunOptions o;
+  o.progress = false;
+  o.world = "loop";
+  o.loop_length = 300.0;
+  o.filter.particles = 8;
+  o.filter.seed = 3;
+  const std::string log_path = temp_path("filter_config") + ".log";
+  RunOptions convert = o;
+  convert.out = log_path;
+  ASSERT_EQ(convert_to_log(convert), 0);
+  const Log log = read_log(log_path);
+  RunOptions from_log = o;
+  from_log.source = "log";
+  from_log.data = log_path;
+  const engine::FilterConfig config = run_filter_config(from_log);
+  EXPECT_EQ(config.association, engine::Association::kKnown);  // auto: every detection has an id
+  EXPECT_EQ(config.particles, 8u);
+  EXPECT_EQ(config.seed, 3u);
+  EXPECT_TRUE(config.record_trajectory);
+  EXPECT_EQ(config.motion.kind, log.header.motion.kind);
+  EXPECT_EQ(config.sensor.sigma_range, log.header.sensor.sigma_range);
+  from_log.association = "ml";
+  EXPECT_EQ(run_filter_config(from_log).association, engine::Association::kMaximumLikelihood);
+
+  from_log.quiet = true;
+  from_log.out = temp_path("quiet");
+  from_log.plot_script.clear();
+  ::testing::internal::CaptureStdout();
+  const nlohmann::json metrics = run_once(from_log);
+  EXPECT_EQ(::testing::internal::GetCapturedStdout(), "");
+  EXPECT_EQ(metrics["particles"], 8);
+  EXPECT_TRUE(std::filesystem::exists(from_log.out + "/metrics.json"));
+  std::filesystem::remove_all(from_log.out);
+  std::filesystem::remove(log_path);
+}
+
 // GPS and pose errors against a path known exactly: a noise-free unicycle driving along +x at
 // 1 m/s (every particle follows it exactly), fixes off the path by known amounts.
 TEST(RunCommand, GpsAndPoseErrorsInterpolateAndSkipGaps) {
