@@ -1,13 +1,15 @@
 # cmake -P script behind the install_find_package test (tests/install/CMakeLists.txt).
-#  1. Builds the package as the `package` preset does (FASTSLAM_PORTABLE, libraries only) from
+#  1. Builds the package as the `package` preset does (FASTSLAM_PORTABLE, no tests) from
 #     SOURCE_DIR in WORK_DIR/package, and checks its compile lines: no -march=native, and on
 #     x86-64 every file compiled for the baseline, only the kernel copies for more.
-#  2. Installs it to WORK_DIR/a and checks the tree: the three libraries, headers only under
-#     include/fastslam/{memory,parallel,engine}/ and none of engine/internal/, no instruction-set
+#  2. Installs it to WORK_DIR/a and checks the tree: the three libraries, the C API
+#     (libfastslam.so, include/fastslam/fastslam.h, its pkg-config file), the Python package and
+#     the command line; headers only under include/fastslam/{memory,parallel,engine}/ and none of
+#     engine/internal/, no instruction-set
 #     flag and no absolute path (of the prefix, the sources or the build) in any package file;
 #     on x86-64, no AVX instruction in the libraries outside the dispatched copies (check_isa.py).
 #  3. Moves the prefix to WORK_DIR/b, then builds against b only: every installed header on its
-#     own (tests/install/headers) and each consumer.
+#     own (tests/install/headers) and the consumers (C++ and C); imports the Python package.
 #  4. Runs each consumer everywhere (run_everywhere): on this CPU with its best random-stream
 #     kernels and with each copy forced by FASTSLAM_ISA, and under qemu-user on x86-64 hosts on
 #     emulated CPUs: qemu64 (the x86-64 baseline: no SSE4, no AVX) must run the baseline copy
@@ -69,9 +71,11 @@ if(NOT EXISTS "${prefix_a}/lib/cmake/fastslam/fastslamConfig.cmake")
 endif()
 file(GLOB_RECURSE installed RELATIVE "${prefix_a}" "${prefix_a}/*")
 set(headers 0)
+set(python_files 0)
 foreach(file IN LISTS installed)
   if(file MATCHES "^include/")
-    if(NOT file MATCHES "^include/fastslam/(memory|parallel|engine)/[^ ]*\\.h$"
+    if(NOT (file MATCHES "^include/fastslam/(memory|parallel|engine)/[^ ]*\\.h$"
+            OR file STREQUAL "include/fastslam/fastslam.h")
        OR file MATCHES "^include/fastslam/engine/internal/")
       message(FATAL_ERROR "not a public header of the package: ${file}")
     endif()
@@ -81,10 +85,15 @@ foreach(file IN LISTS installed)
     if(text MATCHES "-m(arch|tune|avx|fma|sse)")
       message(FATAL_ERROR "${file} passes an instruction-set flag to consumers")
     endif()
-  elseif(NOT file MATCHES "^lib/libfastslam_(memory|parallel|engine)\\.a$")
-    message(FATAL_ERROR "not part of the package: ${file}")  # tools/, executables, ...
+  elseif(file MATCHES "^lib/python3[^/]*/dist-packages/fastslam/")
+    math(EXPR python_files "${python_files} + 1")  # the Python package
+  elseif(NOT file MATCHES "^lib/libfastslam_(memory|parallel|engine)\\.a$"
+         AND NOT file MATCHES "^lib/libfastslam\\.so(\\.[0-9.]+)?$"  # the C API
+         AND NOT file STREQUAL "lib/pkgconfig/fastslam.pc"
+         AND NOT file STREQUAL "bin/fastslam")  # the command line
+    message(FATAL_ERROR "not part of the package: ${file}")  # tools' libraries, tests, ...
   endif()
-  if(file MATCHES "\\.(h|cmake)$")
+  if(file MATCHES "\\.(h|cmake|pc|py)$")
     file(READ "${prefix_a}/${file}" text)
     foreach(path "${prefix_a}" "${SOURCE_DIR}" "${WORK_DIR}")
       string(FIND "${text}" "${path}" at)
@@ -94,9 +103,18 @@ foreach(file IN LISTS installed)
     endforeach()
   endif()
 endforeach()
-message(STATUS "installed ${headers} headers and the three libraries")
+if(python_files EQUAL 0)
+  message(FATAL_ERROR "the Python package was not installed")
+endif()
+foreach(file include/fastslam/fastslam.h lib/libfastslam.so lib/pkgconfig/fastslam.pc bin/fastslam)
+  if(NOT EXISTS "${prefix_a}/${file}")
+    message(FATAL_ERROR "${file} was not installed")
+  endif()
+endforeach()
+message(STATUS "installed ${headers} headers, the libraries, the C API, the command line and "
+  "${python_files} files of the Python package")
 if(X86_64)
-  file(GLOB libraries "${prefix_a}/lib/libfastslam_*.a")
+  file(GLOB libraries "${prefix_a}/lib/libfastslam_*.a" "${prefix_a}/lib/libfastslam.so")
   run(/usr/bin/python3 "${CMAKE_CURRENT_LIST_DIR}/check_isa.py" "${OBJDUMP}" ${libraries})
   message(STATUS "${run_output}")
 endif()
@@ -181,12 +199,19 @@ run(${CMAKE_COMMAND} -S "${CONSUMER_DIR}" -B "${WORK_DIR}/consumer" -G Ninja
 run(${CMAKE_COMMAND} --build "${WORK_DIR}/consumer" ${parallel})
 run_everywhere(consumer "${WORK_DIR}/consumer/consumer")
 
-# The C consumer (to come): a C project built the same way against ${prefix_b}, run with
-# run_everywhere(c_consumer ...); its digest must equal the C++ consumer's if it computes the
-# same draws.
+# The C consumer, through libfastslam.so: on this CPU and on an emulated baseline one.
+run("${WORK_DIR}/consumer/c_consumer")
+message(STATUS "c_consumer: ${run_output}")
+if(X86_64)
+  run(${qemu} -cpu qemu64 "${WORK_DIR}/consumer/c_consumer")
+  message(STATUS "c_consumer under qemu -cpu qemu64: ${run_output}")
+endif()
 
-# The Python import (to come): import the installed module from ${prefix_b} and run it with
-# run_everywhere(python_import /usr/bin/python3 ...).
+# The Python package, imported from the moved prefix by the interpreter it was built for.
+file(GLOB python_dirs LIST_DIRECTORIES true "${prefix_b}/lib/python3*/dist-packages")
+run(${CMAKE_COMMAND} -E env "PYTHONPATH=${python_dirs}" /usr/bin/python3
+    "${CMAKE_CURRENT_LIST_DIR}/python_import.py" "${prefix_b}")
+message(STATUS "${run_output}")
 
 string(TIMESTAMP now "%s")
 math(EXPR seconds "${now} - ${start}")
