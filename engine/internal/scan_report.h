@@ -27,14 +27,17 @@ class ScanRecords {
     mahalanobis2_.resize(particles * observations);
   }
   // Particle i's choices (unknown association: a slot or kNewLandmark; unused with known ids,
-  // where the plan decides) and distances, one per observation.
-  std::int64_t* assignment(std::size_t i) noexcept { return &assignment_[i * observations_]; }
-  double* mahalanobis2(std::size_t i) noexcept { return &mahalanobis2_[i * observations_]; }
+  // where the plan decides) and distances, one per observation. data() + offset: an empty
+  // scan's rows are empty, and indexing an empty vector is undefined.
+  std::int64_t* assignment(std::size_t i) noexcept {
+    return assignment_.data() + i * observations_;
+  }
+  double* mahalanobis2(std::size_t i) noexcept { return mahalanobis2_.data() + i * observations_; }
   const std::int64_t* assignment(std::size_t i) const noexcept {
-    return &assignment_[i * observations_];
+    return assignment_.data() + i * observations_;
   }
   const double* mahalanobis2(std::size_t i) const noexcept {
-    return &mahalanobis2_[i * observations_];
+    return mahalanobis2_.data() + i * observations_;
   }
 
  private:
