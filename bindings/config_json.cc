@@ -362,7 +362,18 @@ Json parse(std::string_view text) {
     std::set<std::string> keys;
   };
   std::vector<Frame> frames;
-  const auto callback = [&frames](int /*depth*/, Json::parse_event_t event, Json& parsed) {
+  // The path of the latest key read, "" at the top.
+  const auto path = [&frames] {
+    std::string out;
+    for (const Frame& f : frames) {
+      if (!f.object || f.key.empty()) continue;
+      if (!out.empty()) out += '.';
+      out += f.key;
+    }
+    return out;
+  };
+  const auto callback = [&frames, &path](int /*depth*/, Json::parse_event_t event,
+                                         Json& parsed) {
     switch (event) {
       case Json::parse_event_t::object_start:
         frames.push_back(Frame{true, {}, {}});
@@ -378,13 +389,7 @@ Json parse(std::string_view text) {
         Frame& frame = frames.back();
         frame.key = parsed.get<std::string>();
         if (!frame.keys.insert(frame.key).second) {
-          std::string path;
-          for (const Frame& f : frames) {
-            if (!f.object) continue;
-            if (!path.empty()) path += '.';
-            path += f.key;
-          }
-          throw std::invalid_argument("config: repeated key \"" + path + "\"");
+          throw std::invalid_argument("config: repeated key \"" + path() + "\"");
         }
         break;
       }
@@ -395,6 +400,13 @@ Json parse(std::string_view text) {
   };
   try {
     return Json::parse(text.begin(), text.end(), callback);
+  } catch (const Json::out_of_range& e) {
+    // A number beyond the doubles (1e999): the only way JSON spells a non-finite one.
+    const std::string where = path();
+    if (where.empty()) {
+      throw std::invalid_argument("config: invalid JSON: " + strip_exception_id(e.what()));
+    }
+    fail(where, "must be a finite number (" + strip_exception_id(e.what()) + ")");
   } catch (const Json::exception& e) {
     throw std::invalid_argument("config: invalid JSON: " + strip_exception_id(e.what()));
   }

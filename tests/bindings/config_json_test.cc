@@ -238,7 +238,11 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"{} x", "invalid JSON: parse error at line 1, column 4"},
         BadCase{"{/* a comment */}", "invalid JSON"},
         BadCase{"{\"a\xff\": 1}", "invalid JSON"},
-        BadCase{R"({"log_new_landmark": 1e999})", "invalid JSON: number overflow"},
+        BadCase{R"({"log_new_landmark": 1e999})",
+                R"(config: "log_new_landmark" must be a finite number (number overflow parsing '1e999'))"},
+        BadCase{R"({"motion": {"sigma_control": [0.3, -1e400]}})",
+                R"("motion.sigma_control" must be a finite number)"},
+        BadCase{"1e999", "config: invalid JSON: number overflow parsing '1e999'"},
         BadCase{"[]", "config: the configuration must be a JSON object (got an array"},
         BadCase{"null", "must be a JSON object (got null)"},
         // Unknown and repeated keys.
