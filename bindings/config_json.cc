@@ -130,13 +130,13 @@ class Reader {
   Reader(const Json& object, std::string prefix) : object_(object), prefix_(std::move(prefix)) {}
 
   template <class E>
-    requires std::is_enum_v<E>
+  requires std::is_enum_v<E>
   void field(std::string_view key, E& out) {
     const Json* v = find(key);
     if (v == nullptr) return;
     if (!v->is_string()) {
-      fail(path(key), "must be a string: " + engine::enum_name_list<E>() + " (got " +
-                          describe(*v) + ")");
+      fail(path(key),
+           "must be a string: " + engine::enum_name_list<E>() + " (got " + describe(*v) + ")");
     }
     try {
       out = engine::parse_enum<E>(v->get_ref<const std::string&>());
@@ -154,8 +154,7 @@ class Reader {
 
   // An integral float (1e3, 100.0) is taken too: some writers print every number as a double.
   template <std::unsigned_integral U>
-    requires(!std::same_as<U, bool>)
-  void field(std::string_view key, U& out) {
+  requires(!std::same_as<U, bool>) void field(std::string_view key, U& out) {
     const Json* v = find(key);
     if (v == nullptr) return;
     constexpr U kMax = std::numeric_limits<U>::max();
@@ -172,8 +171,8 @@ class Reader {
         return;
       }
     }
-    fail(path(key), "must be an integer in [0, " + std::to_string(kMax) + "] (got " +
-                        describe(*v) + ")");
+    fail(path(key),
+         "must be an integer in [0, " + std::to_string(kMax) + "] (got " + describe(*v) + ")");
   }
 
   void field(std::string_view key, double& out) {
@@ -187,9 +186,9 @@ class Reader {
     const Json* v = find(key);
     if (v == nullptr) return;
     if (!v->is_array() || v->size() < min_count || v->size() > N) {
-      const std::string count = min_count == N ? std::to_string(N)
-                                               : std::to_string(min_count) + " to " +
-                                                     std::to_string(N);
+      const std::string count = min_count == N
+                                    ? std::to_string(N)
+                                    : std::to_string(min_count) + " to " + std::to_string(N);
       fail(path(key), "must be an array of " + count + " numbers (got " +
                           (v->is_array() ? std::to_string(v->size()) + " elements" : describe(*v)) +
                           ")");
@@ -281,7 +280,7 @@ class Writer {
   explicit Writer(std::string prefix) : prefix_(std::move(prefix)) {}
 
   template <class E>
-    requires std::is_enum_v<E>
+  requires std::is_enum_v<E>
   void field(std::string_view key, const E& value) {
     if (!engine::enum_known(value)) {
       throw std::invalid_argument("config_to_json: \"" + path(key) + "\" is not a known " +
@@ -293,8 +292,7 @@ class Writer {
   void field(std::string_view key, const bool& value) { json_[std::string(key)] = value; }
 
   template <std::unsigned_integral U>
-    requires(!std::same_as<U, bool>)
-  void field(std::string_view key, const U& value) {
+  requires(!std::same_as<U, bool>) void field(std::string_view key, const U& value) {
     json_[std::string(key)] = static_cast<std::uint64_t>(value);
   }
 
@@ -362,7 +360,17 @@ Json parse(std::string_view text) {
     std::set<std::string> keys;
   };
   std::vector<Frame> frames;
-  const auto callback = [&frames](int /*depth*/, Json::parse_event_t event, Json& parsed) {
+  // The path of the latest key read, "" at the top.
+  const auto path = [&frames] {
+    std::string out;
+    for (const Frame& f : frames) {
+      if (!f.object || f.key.empty()) continue;
+      if (!out.empty()) out += '.';
+      out += f.key;
+    }
+    return out;
+  };
+  const auto callback = [&frames, &path](int /*depth*/, Json::parse_event_t event, Json& parsed) {
     switch (event) {
       case Json::parse_event_t::object_start:
         frames.push_back(Frame{true, {}, {}});
@@ -378,13 +386,7 @@ Json parse(std::string_view text) {
         Frame& frame = frames.back();
         frame.key = parsed.get<std::string>();
         if (!frame.keys.insert(frame.key).second) {
-          std::string path;
-          for (const Frame& f : frames) {
-            if (!f.object) continue;
-            if (!path.empty()) path += '.';
-            path += f.key;
-          }
-          throw std::invalid_argument("config: repeated key \"" + path + "\"");
+          throw std::invalid_argument("config: repeated key \"" + path() + "\"");
         }
         break;
       }
@@ -395,6 +397,13 @@ Json parse(std::string_view text) {
   };
   try {
     return Json::parse(text.begin(), text.end(), callback);
+  } catch (const Json::out_of_range& e) {
+    // A number beyond the doubles (1e999): the only way JSON spells a non-finite one.
+    const std::string where = path();
+    if (where.empty()) {
+      throw std::invalid_argument("config: invalid JSON: " + strip_exception_id(e.what()));
+    }
+    fail(where, "must be a finite number (" + strip_exception_id(e.what()) + ")");
   } catch (const Json::exception& e) {
     throw std::invalid_argument("config: invalid JSON: " + strip_exception_id(e.what()));
   }
@@ -412,8 +421,8 @@ void check(const FilterConfig& c) {
     throw std::invalid_argument("config: \"" + std::string(key) + "\": " + e.what());
   }
   if (!(c.resample.ess_fraction >= 0 && c.resample.ess_fraction <= 1)) {
-    fail("resample.ess_fraction", "must be in [0, 1] (got " + shortest(c.resample.ess_fraction) +
-                                      ")");
+    fail("resample.ess_fraction",
+         "must be in [0, 1] (got " + shortest(c.resample.ess_fraction) + ")");
   }
   try {
     engine::validate(c);

@@ -3,7 +3,7 @@
 // ("motion": {"kind": "bailey-car", "wheelbase": 4, "sigma_control": [0.3, 0.05]}), enums by
 // the names of their tables (engine/enum_names.h), SI units and radians. Every key is
 // optional (a missing one keeps FilterConfig{}'s value); `split_seconds` also takes "never"
-// (infinity) and `initial_pose` 3 or 5 numbers. docs/c-api.md lists the keys.
+// (infinity) and `initial_pose` 3 to 5 numbers. docs/c-api.md lists the keys.
 // Thread safety: pure functions. Costs: O(text length); both allocate.
 #pragma once
 

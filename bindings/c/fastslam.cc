@@ -66,7 +66,7 @@ thread_local ErrorText t_last_error;
 
 struct fastslam_filter {
   std::unique_ptr<Filter> filter;
-  ErrorText error;  // of the latest call; "" after a success
+  ErrorText error;                // of the latest call; "" after a success
   std::vector<Observation> scan;  // observe's copy of the caller's observations
   // What estimate() gave since the filter last changed: estimate, map and associations read it.
   std::optional<Estimate> snapshot;
@@ -114,18 +114,18 @@ fastslam_status guarded(fastslam_filter* f, Body&& body) noexcept {
 }
 
 // The pointer checks, before anything can throw (their messages are literals).
-#define FASTSLAM_REQUIRE_FILTER(f, function)                                         \
-  do {                                                                               \
-    if ((f) == nullptr) {                                                            \
-      return fail(nullptr, FASTSLAM_INVALID_ARGUMENT, function ": filter is NULL");  \
-    }                                                                                \
+#define FASTSLAM_REQUIRE_FILTER(f, function)                                        \
+  do {                                                                              \
+    if ((f) == nullptr) {                                                           \
+      return fail(nullptr, FASTSLAM_INVALID_ARGUMENT, function ": filter is NULL"); \
+    }                                                                               \
   } while (false)
 
-#define FASTSLAM_REQUIRE_POINTER(f, p, function, name)                              \
-  do {                                                                              \
-    if ((p) == nullptr) {                                                           \
-      return fail(f, FASTSLAM_INVALID_ARGUMENT, function ": " name " is NULL");     \
-    }                                                                               \
+#define FASTSLAM_REQUIRE_POINTER(f, p, function, name)                          \
+  do {                                                                          \
+    if ((p) == nullptr) {                                                       \
+      return fail(f, FASTSLAM_INVALID_ARGUMENT, function ": " name " is NULL"); \
+    }                                                                           \
   } while (false)
 
 std::string too_large(const char* function, const char* what, std::size_t value,
@@ -154,8 +154,8 @@ fastslam_status copy_out(fastslam_filter* f, const char* function, const std::ve
   if (buf == nullptr) return FASTSLAM_OK;
   if (capacity < items.size()) {
     return fail(f, FASTSLAM_BUFFER_TOO_SMALL,
-                std::string(function) + ": the buffer holds " + std::to_string(capacity) +
-                    ", " + std::to_string(items.size()) + " are needed");
+                std::string(function) + ": the buffer holds " + std::to_string(capacity) + ", " +
+                    std::to_string(items.size()) + " are needed");
   }
   for (std::size_t i = 0; i < items.size(); ++i) buf[i] = convert(items[i]);
   return FASTSLAM_OK;
@@ -243,9 +243,9 @@ fastslam_status observe(fastslam_filter* f, const char* function,
                   too_large(function, "count", count, FASTSLAM_MAX_COUNT));
     }
     if (observations == nullptr && count > 0) {
-      return fail(f, FASTSLAM_INVALID_ARGUMENT,
-                  std::string(function) + ": observations is NULL and count = " +
-                      std::to_string(count));
+      return fail(
+          f, FASTSLAM_INVALID_ARGUMENT,
+          std::string(function) + ": observations is NULL and count = " + std::to_string(count));
     }
     f->scan.resize(count);
     for (std::size_t i = 0; i < count; ++i) {
@@ -446,15 +446,15 @@ fastslam_status fastslam_save_file(fastslam_filter* filter, const char* path) {
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     if (!out) {
       return fail(filter, FASTSLAM_IO_ERROR,
-                  std::string("fastslam_save_file: cannot open '") + path + "' for writing: " +
-                      system_message(errno));
+                  std::string("fastslam_save_file: cannot open '") + path +
+                      "' for writing: " + system_message(errno));
     }
     filter->filter->save(out);
     out.close();
     if (!out) {
       return fail(filter, FASTSLAM_IO_ERROR,
-                  std::string("fastslam_save_file: writing '") + path + "' failed: " +
-                      system_message(errno));
+                  std::string("fastslam_save_file: writing '") + path +
+                      "' failed: " + system_message(errno));
     }
     return FASTSLAM_OK;
   });
@@ -474,8 +474,8 @@ fastslam_status fastslam_load_file(const char* path, fastslam_filter** out) {
     std::ifstream in(path, std::ios::binary);
     if (!in) {
       return fail(nullptr, FASTSLAM_IO_ERROR,
-                  std::string("fastslam_load_file: cannot open '") + path + "' for reading: " +
-                      system_message(errno));
+                  std::string("fastslam_load_file: cannot open '") + path +
+                      "' for reading: " + system_message(errno));
     }
     return load_from(in, "fastslam_load_file", out, [&in]() -> std::uint64_t {
       const std::streamoff here = in.tellg();
@@ -521,9 +521,9 @@ fastslam_status fastslam_save_alloc(fastslam_filter* filter, void** data, size_t
     filter->saved.reset();
     void* memory = std::malloc(bytes.empty() ? 1 : bytes.size());
     if (memory == nullptr) {
-      return fail(filter, FASTSLAM_OUT_OF_MEMORY,
-                  "fastslam_save_alloc: cannot allocate " + std::to_string(bytes.size()) +
-                      " bytes");
+      return fail(
+          filter, FASTSLAM_OUT_OF_MEMORY,
+          "fastslam_save_alloc: cannot allocate " + std::to_string(bytes.size()) + " bytes");
     }
     std::memcpy(memory, bytes.data(), bytes.size());
     *data = memory;

@@ -85,13 +85,13 @@ typedef struct fastslam_observation {
 typedef struct fastslam_estimate {
   double time; /* the latest data's time: the last time given (timed calls), advanced by the dt
                   of every untimed predict since; 0 until a time is given */
-  double mean_pose[5]; /* weighted mean over the particles (heading by circular mean) */
+  double mean_pose[5];       /* weighted mean over the particles (heading by circular mean) */
   double pose_covariance[9]; /* of (x, y, theta) about mean_pose, row-major */
   double best_pose[5];       /* the pose of the particle of highest weight */
   uint32_t best_particle;
-  double effective_sample_size;  /* 1 / sum of squared normalised weights, in [1, particles] */
-  size_t landmark_count;         /* landmarks in the best particle's map (fastslam_get_map) */
-  size_t observation_count;      /* observations of the last scan (fastslam_get_associations) */
+  double effective_sample_size; /* 1 / sum of squared normalised weights, in [1, particles] */
+  size_t landmark_count;        /* landmarks in the best particle's map (fastslam_get_map) */
+  size_t observation_count;     /* observations of the last scan (fastslam_get_associations) */
 } fastslam_estimate;
 
 /* A landmark of the best particle's map, in that particle's frame. */
@@ -182,8 +182,7 @@ FASTSLAM_API fastslam_status fastslam_observe_timed(fastslam_filter* filter,
                                                     size_t count, double time);
 
 /* Fills *out with the current estimate (runs any queued controls first). */
-FASTSLAM_API fastslam_status fastslam_get_estimate(fastslam_filter* filter,
-                                                  fastslam_estimate* out);
+FASTSLAM_API fastslam_status fastslam_get_estimate(fastslam_filter* filter, fastslam_estimate* out);
 
 /* Copies the best particle's map, in slot order. *count is set to the number of landmarks.
  * buf NULL: only that size query. Otherwise capacity must be at least *count (else
@@ -195,12 +194,12 @@ FASTSLAM_API fastslam_status fastslam_get_map(fastslam_filter* filter, fastslam_
 /* Copies the last scan's associations, one per observation in scan order; as fastslam_get_map for
  * the buffer. Empty before the first scan. */
 FASTSLAM_API fastslam_status fastslam_get_associations(fastslam_filter* filter,
-                                                       fastslam_association* buf,
-                                                       size_t capacity, size_t* count);
+                                                       fastslam_association* buf, size_t capacity,
+                                                       size_t* count);
 
 /* Counters and timings. O(1). */
 FASTSLAM_API fastslam_status fastslam_get_statistics(fastslam_filter* filter,
-                                                    fastslam_statistics* out);
+                                                     fastslam_statistics* out);
 
 /* Saves the whole state (configuration, particles, maps, queued controls, clock) to a file,
  * which is replaced. A filter loaded from it continues bit for bit as this one would. On

@@ -274,6 +274,8 @@ StateHeader read_header(std::istream& in) {
        {&c.step, &c.controls, &c.scans, &c.observations, &c.resamples, &c.weight_resets}) {
     *v = get<std::uint64_t>(in);
   }
+  // The random streams are keyed by step < 2^56 (parallel/random_stream.h).
+  if (c.step >= std::uint64_t{1} << 56) corrupt("step counter");
   h.variance_bound = get<double>(in);
   if (!std::isfinite(h.variance_bound) || h.variance_bound < 0) corrupt("variance bound");
   h.time = get<double>(in);

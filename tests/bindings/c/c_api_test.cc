@@ -3,8 +3,6 @@
 // states from a file and a buffer), buffers and size queries, a saved and restored filter
 // continuing bit for bit, independent handles on independent threads. Run under ASan/UBSan by
 // the asan preset: a crash or a leak fails it.
-#include "bindings/c/fastslam.h"
-
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -21,12 +19,12 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
-#include <vector>
-
 #include <unistd.h>
+#include <vector>
 
 #include <gtest/gtest.h>
 
+#include "bindings/c/fastslam.h"
 #include "bindings/config_json.h"
 #include "engine/filter.h"
 
@@ -72,7 +70,8 @@ struct World {
     for (int i = 0; i < 24; ++i) {
       const double lx = 12 * std::cos(i * std::numbers::pi / 12) + 2;
       const double ly = 12 * std::sin(i * std::numbers::pi / 12) + 4;
-      const double bearing = std::remainder(std::atan2(ly - y, lx - x) - theta, 2 * std::numbers::pi);
+      const double bearing =
+          std::remainder(std::atan2(ly - y, lx - x) - theta, 2 * std::numbers::pi);
       if (std::abs(bearing) < 1.5) out.push_back({std::hypot(lx - x, ly - y), bearing, i});
     }
     return out;
@@ -202,9 +201,8 @@ TEST(CApi, CreateRefusesBadConfigurationsWithTheParsersMessage) {
     f = reinterpret_cast<fastslam_filter*>(0x1);
     EXPECT_EQ(fastslam_create(json, &f), FASTSLAM_INVALID_ARGUMENT) << json;
     EXPECT_EQ(f, nullptr);
-    const std::string expected = exception_text([&] {
-      fastslam::engine::Filter filter(fastslam::bindings::config_from_json(json));
-    });
+    const std::string expected = exception_text(
+        [&] { fastslam::engine::Filter filter(fastslam::bindings::config_from_json(json)); });
     EXPECT_EQ(fastslam_last_error(nullptr), expected) << json;
   }
   EXPECT_NE(std::string(fastslam_last_error(nullptr)).find("EkfSlam"), std::string::npos);
@@ -287,25 +285,29 @@ TEST(CApi, BadInputLeavesTheFilterUnchangedWithTheEnginesMessage) {
     EXPECT_EQ(fastslam_last_error(a.get()), exception_text(engine_call));
     EXPECT_EQ(fastslam_last_error(nullptr), exception_text(engine_call));
   };
-  expect_refused(fastslam_predict(a.get(), kNaN, 0, 0.1),
-                 [&] { reference.predict({kNaN, 0}, 0.1); });
-  expect_refused(fastslam_predict(a.get(), 1, kInf, 0.1),
-                 [&] { reference.predict({1, kInf}, 0.1); });
+  expect_refused(fastslam_predict(a.get(), kNaN, 0, 0.1), [&] {
+    reference.predict({kNaN, 0}, 0.1);
+  });
+  expect_refused(fastslam_predict(a.get(), 1, kInf, 0.1), [&] {
+    reference.predict({1, kInf}, 0.1);
+  });
   expect_refused(fastslam_predict(a.get(), 1, 0, -0.1), [&] { reference.predict({1, 0}, -0.1); });
   expect_refused(fastslam_predict(a.get(), 1, 0, kNaN), [&] { reference.predict({1, 0}, kNaN); });
   // Time going backwards, or not a time.
-  expect_refused(fastslam_predict_timed(a.get(), 1, 0, 0.1, 1.0),
-                 [&] { reference.predict({1, 0}, 0.1, 1.0); });
-  expect_refused(fastslam_predict_timed(a.get(), 1, 0, 0.1, kNaN),
-                 [&] { reference.predict({1, 0}, 0.1, kNaN); });
+  expect_refused(fastslam_predict_timed(a.get(), 1, 0, 0.1, 1.0), [&] {
+    reference.predict({1, 0}, 0.1, 1.0);
+  });
+  expect_refused(fastslam_predict_timed(a.get(), 1, 0, 0.1, kNaN), [&] {
+    reference.predict({1, 0}, 0.1, kNaN);
+  });
   const fastslam_observation good{5.0, 0.1, 3};
-  expect_refused(fastslam_observe_timed(a.get(), &good, 1, 0.5),
-                 [&] { reference.observe(std::vector<fastslam::engine::Observation>{{5.0, 0.1, 3}}, 0.5); });
-  for (const fastslam_observation bad : {fastslam_observation{kNaN, 0.1, 3},
-                                         fastslam_observation{5.0, kInf, 3},
-                                         fastslam_observation{-1.0, 0.1, 3},
-                                         fastslam_observation{0.0, 0.1, 3},
-                                         fastslam_observation{5.0, 0.1, -1}}) {
+  expect_refused(fastslam_observe_timed(a.get(), &good, 1, 0.5), [&] {
+    reference.observe(std::vector<fastslam::engine::Observation>{{5.0, 0.1, 3}}, 0.5);
+  });
+  for (const fastslam_observation bad :
+       {fastslam_observation{kNaN, 0.1, 3}, fastslam_observation{5.0, kInf, 3},
+        fastslam_observation{-1.0, 0.1, 3}, fastslam_observation{0.0, 0.1, 3},
+        fastslam_observation{5.0, 0.1, -1}}) {
     const fastslam_observation scan[2] = {good, bad};
     expect_refused(fastslam_observe(a.get(), scan, 2), [&] {
       reference.observe(std::vector<fastslam::engine::Observation>{

@@ -145,9 +145,8 @@ static void print_estimate(fastslam_filter* filter, unsigned long scan,
          e.mean_pose[2]);
   for (i = 0; i < 9; ++i) printf("%a%s", e.pose_covariance[i], i < 8 ? "," : "");
   printf(" best=%a %a %a particle=%" PRIu32 " ess=%a landmarks=%lu observations=%lu\n",
-         e.best_pose[0], e.best_pose[1], e.best_pose[2], e.best_particle,
-         e.effective_sample_size, (unsigned long)e.landmark_count,
-         (unsigned long)e.observation_count);
+         e.best_pose[0], e.best_pose[1], e.best_pose[2], e.best_particle, e.effective_sample_size,
+         (unsigned long)e.landmark_count, (unsigned long)e.observation_count);
   check(fastslam_get_associations(filter, NULL, 0, &count), "fastslam_get_associations", filter);
   if (count != e.observation_count) die("the association count differs from the estimate's", "");
   if (count > *capacity) {
@@ -259,8 +258,10 @@ int main(int argc, char** argv) {
       300) {
     die("arguments too long", "");
   }
-  sprintf(text, "\"algorithm\":\"%s\",\"association\":\"%s\",\"particles\":%s,\"seed\":%s,"
-          "\"threads\":%s", argv[2], argv[3], argv[4], argv[5], argv[6]);
+  sprintf(text,
+          "\"algorithm\":\"%s\",\"association\":\"%s\",\"particles\":%s,\"seed\":%s,"
+          "\"threads\":%s",
+          argv[2], argv[3], argv[4], argv[5], argv[6]);
   append(json, sizeof json, text);
 
   while ((line = read_line(in, &line_buffer, &line_capacity)) != NULL) {

@@ -57,8 +57,7 @@ void print_map_and_counters(Filter& filter, bool reloaded) {
 
 int main(int argc, char** argv) {
   if (argc != 7 && argc != 8) {
-    std::fprintf(stderr,
-                 "usage: %s LOG ALGORITHM ASSOCIATION PARTICLES SEED THREADS [RELOADED]\n",
+    std::fprintf(stderr, "usage: %s LOG ALGORITHM ASSOCIATION PARTICLES SEED THREADS [RELOADED]\n",
                  argv[0]);
     return 2;
   }

@@ -114,5 +114,18 @@ TEST(StateIoTest, CorruptStreamsFail) {
   EXPECT_THROW(round_trip(bad_version, &unused), std::runtime_error);
 }
 
+// The random streams take steps below 2^56: a larger saved step is corrupt, not a key.
+TEST(StateIoTest, StepBeyondTheStreamsFails) {
+  FilterConfig c;
+  c.particles = 5;
+  FilterState s(c);
+  fill(s);
+  std::vector<TrajectoryPoint> unused;
+  s.counters.step = (std::uint64_t{1} << 56) - 1;
+  EXPECT_NO_THROW(round_trip(save(s, {}), &unused));
+  s.counters.step = std::uint64_t{1} << 56;
+  EXPECT_THROW(round_trip(save(s, {}), &unused), std::runtime_error);
+}
+
 }  // namespace
 }  // namespace fastslam::engine::internal

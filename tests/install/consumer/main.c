@@ -1,10 +1,9 @@
 /* Uses the installed C API (<fastslam/fastslam.h>, libfastslam) from C99: the same drive past
  * one landmark as main.cc, and an error's message. */
+#include <fastslam/fastslam.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
-
-#include <fastslam/fastslam.h>
 
 int main(void) {
   fastslam_filter* filter = NULL;
