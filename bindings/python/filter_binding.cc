@@ -57,6 +57,18 @@ class PyFilter {
     return work(*filter_);
   }
 
+  // For O(1) work (queueing a control): with the GIL held when the filter is free, since
+  // releasing and taking back the GIL would cost more than the work; released only to wait for
+  // another thread's call.
+  template <class Work>
+  decltype(auto) call_short(Work&& work) {
+    std::unique_lock lock(mutex_, std::try_to_lock);
+    if (lock.owns_lock()) return work(*filter_);
+    py::gil_scoped_release release;
+    lock.lock();
+    return work(*filter_);
+  }
+
  private:
   std::mutex mutex_;
   std::unique_ptr<engine::Filter> filter_;
@@ -144,6 +156,24 @@ py::array_t<double> vector_argument(const py::handle& values, const char* what) 
                                 py::str(a.attr("shape")).cast<std::string>());
   }
   return a;
+}
+
+// predict's u: a tuple or list of two Python floats read directly (the common case, and a
+// numpy conversion costs more than queueing the control), anything else through numpy.
+engine::Control control_argument(const py::handle& u) {
+  if ((PyTuple_Check(u.ptr()) || PyList_Check(u.ptr())) && PySequence_Fast_GET_SIZE(u.ptr()) == 2) {
+    PyObject* const u0 = PySequence_Fast_GET_ITEM(u.ptr(), 0);
+    PyObject* const u1 = PySequence_Fast_GET_ITEM(u.ptr(), 1);
+    if (PyFloat_CheckExact(u0) && PyFloat_CheckExact(u1)) {
+      return {PyFloat_AS_DOUBLE(u0), PyFloat_AS_DOUBLE(u1)};
+    }
+  }
+  const py::array_t<double> a = vector_argument(u, "predict: u");
+  if (a.size() != 2) {
+    throw std::invalid_argument("predict: u must hold 2 values (u0, u1), not " +
+                                std::to_string(a.size()));
+  }
+  return {a.at(0), a.at(1)};
 }
 
 std::vector<engine::Observation> scan_argument(const py::handle& ranges, const py::handle& bearings,
@@ -346,13 +376,8 @@ array: id, x, y, sxx, sxy, syy, log_odds, last_seen: the best particle's map).)d
       .def(
           "predict",
           [](PyFilter& self, const py::object& u, double dt, std::optional<double> t) {
-            const py::array_t<double> a = vector_argument(u, "predict: u");
-            if (a.size() != 2) {
-              throw std::invalid_argument("predict: u must hold 2 values (u0, u1), not " +
-                                          std::to_string(a.size()));
-            }
-            const engine::Control control{a.at(0), a.at(1)};
-            self.call([&](engine::Filter& f) {
+            const engine::Control control = control_argument(u);
+            self.call_short([&](engine::Filter& f) {
               if (t) {
                 f.predict(control, dt, *t);
               } else {
