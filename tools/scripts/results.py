@@ -8,6 +8,7 @@ docs/results.json, so re-measuring one section leaves the others as they were me
 
     /usr/bin/python3 tools/scripts/results.py --run accuracy   # fastslam run over seeds
     /usr/bin/python3 tools/scripts/results.py --run speed      # benchmarks (an idle machine!)
+    /usr/bin/python3 tools/scripts/results.py --run front-ends # the C API's and Python's cost
     /usr/bin/python3 tools/scripts/results.py                  # re-render from results.json
 
 Paths are relative to the repository root; ../shared must be beside it.
@@ -270,7 +271,36 @@ def render(data):
                 lines.append(f"| `{r['name']}` | {r['real_time']:.4g} {r['unit']} | "
                              f"{r['cpu_time']:.4g} {r['unit']} |")
             lines.append("")
+    fronts = data.get("front_ends")
+    if fronts:
+        r = fronts["result"]
+        lines += ["## Front ends", "",
+                  f"Measured {fronts['date']} on {fronts['machine']}: {r['case']}; the same "
+                  "scan-by-scan pass (predict per control; observe, then the estimate with the "
+                  "map and the scan's associations, per scan) through each front end, the log "
+                  f"read into memory first; median and minimum of {r['repeats']} whole runs, "
+                  "interleaved; all three end on the same pose, bit for bit. Overhead = median / "
+                  "C++'s median - 1.", "",
+                  f"`{fronts['command']}`", "",
+                  "| front end | median | min | overhead |", "|---|---|---|---|"]
+        for name, v in r["front_ends"].items():
+            lines.append(f"| {name} | {1e3 * v['median_seconds']:.2f} ms | "
+                         f"{1e3 * v['min_seconds']:.2f} ms | {100 * v['overhead']:.1f} % |")
+        lines.append("")
     return "\n".join(lines)
+
+
+def measure_front_ends(build, repetitions):
+    script = os.path.join(ROOT, "bench", "bindings", "front_end_overhead.py")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "front_ends.json")
+        subprocess.run(["/usr/bin/python3", script, build, SHARED, "--repeats", str(repetitions),
+                        "--json", out], check=True)
+        with open(out) as f:
+            result = json.load(f)
+    command = (f"/usr/bin/python3 bench/bindings/front_end_overhead.py build/release ../shared "
+               f"--repeats {repetitions}")
+    return {"command": command, "result": result}
 
 
 def readme_table(data):
@@ -298,7 +328,8 @@ def update_readme(data):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--run", choices=["accuracy", "speed", "all"], help="measure anew")
+    parser.add_argument("--run", choices=["accuracy", "speed", "front-ends", "all"],
+                        help="measure anew")
     parser.add_argument("--build", default=os.path.join(ROOT, "build", "release"))
     parser.add_argument("--jobs", type=int, default=2, help="seeds run at once (accuracy)")
     parser.add_argument("--repetitions", type=int, default=5, help="benchmark repetitions")
@@ -317,6 +348,8 @@ def main():
         data["accuracy"] = dict(stamp, tables=measure_accuracy(fastslam, opts.jobs))
     if opts.run in ("speed", "all"):
         data["speed"] = dict(stamp, tables=measure_speed(opts.build, opts.repetitions))
+    if opts.run in ("front-ends", "all"):
+        data["front_ends"] = dict(stamp, **measure_front_ends(opts.build, opts.repetitions))
     with open(opts.json, "w") as f:
         json.dump(data, f, indent=1, sort_keys=True)
         f.write("\n")
