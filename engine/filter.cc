@@ -78,6 +78,42 @@ void Filter::predict(const Control& control, double dt, double time) {
   s.timed = true;
 }
 
+void Filter::predict(std::span<const Control> controls, std::span<const double> dt,
+                     std::span<const double> times) {
+  internal::FilterState& s = impl_->state;
+  if (dt.size() != controls.size() || (!times.empty() && times.size() != controls.size())) {
+    throw std::invalid_argument("Filter::predict: " + std::to_string(controls.size()) +
+                                " controls, " + std::to_string(dt.size()) + " durations and " +
+                                std::to_string(times.size()) +
+                                " times (durations and times must match the controls)");
+  }
+  // Every check first, on a copy of the clock, so that a refusal queues nothing.
+  double clock = s.time;
+  bool timed = s.timed;
+  for (std::size_t k = 0; k < controls.size(); ++k) {
+    try {
+      internal::check_control(controls[k], dt[k]);
+      if (times.empty()) {
+        clock += dt[k];
+      } else {
+        internal::check_time(times[k], clock, timed);
+        clock = times[k];
+        timed = true;
+      }
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument("control " + std::to_string(k) + ": " + e.what());
+    }
+  }
+  s.pending.reserve(s.pending.size() + controls.size());
+  for (std::size_t k = 0; k < controls.size(); ++k) {
+    s.pending.push_back({controls[k].u0, controls[k].u1, dt[k], s.counters.step});
+    ++s.counters.step;
+    ++s.counters.controls;
+  }
+  s.time = clock;
+  s.timed = timed;
+}
+
 void Filter::observe(std::span<const Observation> scan, double time) {
   internal::FilterState& s = impl_->state;
   internal::check_time(time, s.time, s.timed);

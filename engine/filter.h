@@ -153,6 +153,12 @@ class Filter {
   // time was given yet); the untimed form advances the clock by dt.
   void predict(const Control& control, double dt);
   void predict(const Control& control, double dt, double time);
+  // Queues controls[k] held for dt[k] (and, unless `times` is empty, at time times[k]) for every
+  // k, as predict would one at a time, for front ends that hand over the odometry between two
+  // scans in one call. All or nothing: throws std::invalid_argument naming the first bad index
+  // (or unequal lengths) and queues none. Costs O(K).
+  void predict(std::span<const Control> controls, std::span<const double> dt,
+               std::span<const double> times = {});
 
   // Runs the queued controls and this scan through every particle, then resamples by policy.
   // Throws std::invalid_argument (and changes nothing) for a bad observation or time (as

@@ -16,6 +16,7 @@
 #include <optional>
 #include <sstream>
 #include <stdexcept>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -74,14 +75,13 @@ class PyFilter {
   std::unique_ptr<engine::Filter> filter_;
 };
 
-// fastslam.Estimate: engine::Estimate as numbers and numpy arrays.
+// fastslam.Estimate: engine::Estimate as numbers and numpy arrays. The arrays are made when
+// first read (then kept, so a read gives the same object each time): a front end that reads
+// only the pose does not pay for the map's.
 struct PyEstimate {
-  double time = 0.0;
+  engine::Estimate e;
   // Plain py::array members (array_t<Record> behind them): help() shows "numpy.ndarray".
-  py::array mean_pose, covariance, best_pose;
-  std::uint32_t best_particle = 0;
-  double effective_sample_size = 0.0;
-  py::array associations, map;
+  py::object mean_pose, covariance, best_pose, associations, map;
 };
 
 py::array_t<double> copy_array(const double* values, std::vector<py::ssize_t> shape) {
@@ -99,23 +99,28 @@ py::array_t<MapRecord> map_array(const std::vector<engine::MapLandmark>& map) {
   return out;
 }
 
-PyEstimate to_python(const engine::Estimate& e) {
-  PyEstimate out;
-  out.time = e.time;
-  out.mean_pose = copy_array(e.mean_pose, {5});
-  out.covariance = copy_array(e.pose_covariance, {3, 3});
-  out.best_pose = copy_array(e.best_pose, {5});
-  out.best_particle = e.best_particle;
-  out.effective_sample_size = e.effective_sample_size;
-  py::array_t<AssociationRecord> associations(static_cast<py::ssize_t>(e.associations.size()));
-  AssociationRecord* row = associations.mutable_data();
-  for (const engine::ObservationAssociation& a : e.associations) {
+py::array association_array(const std::vector<engine::ObservationAssociation>& report) {
+  py::array_t<AssociationRecord> out(static_cast<py::ssize_t>(report.size()));
+  AssociationRecord* row = out.mutable_data();
+  for (const engine::ObservationAssociation& a : report) {
     *row++ = {a.observation, static_cast<std::uint32_t>(a.outcome), a.landmark_id, a.mahalanobis2};
   }
-  out.associations = std::move(associations);
-  out.map = map_array(e.map);
   return out;
 }
+
+PyEstimate to_python(engine::Estimate&& e) {
+  PyEstimate out;
+  out.e = std::move(e);
+  return out;
+}
+
+// The cached array of an Estimate attribute, made by `make` on first read.
+template <class Make>
+py::object lazy(py::object& slot, Make&& make) {
+  if (!slot) slot = make();
+  return slot;
+}
+
 
 // `base` with `overrides` laid over it: objects merged key by key, anything else replaced.
 void merge(nlohmann::json& base, const nlohmann::json& overrides) {
@@ -312,14 +317,16 @@ std::unique_ptr<PyFilter> from_bytes(const py::buffer& data) {
   return load_stream(in);
 }
 
-std::string repr(const PyEstimate& e) {
-  const auto* pose = static_cast<const double*>(e.mean_pose.data());
+std::string repr(const PyEstimate& p) {
+  const engine::Estimate& e = p.e;
+  const double* pose = e.mean_pose;
   char text[256];
   std::snprintf(text, sizeof(text),
                 "fastslam.Estimate(time=%g, mean_pose=[%g, %g, %g], best_particle=%u, "
                 "effective_sample_size=%g, associations=%zd, map=%zd landmarks)",
                 e.time, pose[0], pose[1], pose[2], e.best_particle, e.effective_sample_size,
-                e.associations.size(), e.map.size());
+                static_cast<py::ssize_t>(e.associations.size()),
+                static_cast<py::ssize_t>(e.map.size()));
   return text;
 }
 
@@ -348,14 +355,35 @@ best_pose (5,) of the particle of highest weight, best_particle (its index),
 effective_sample_size, associations (structured array: observation, outcome (fastslam.Outcome),
 landmark_id, mahalanobis2: the last scan, as the most likely particle took it), map (structured
 array: id, x, y, sxx, sxy, syy, log_odds, last_seen: the best particle's map).)doc")
-      .def_readonly("time", &PyEstimate::time)
-      .def_readonly("mean_pose", &PyEstimate::mean_pose)
-      .def_readonly("covariance", &PyEstimate::covariance)
-      .def_readonly("best_pose", &PyEstimate::best_pose)
-      .def_readonly("best_particle", &PyEstimate::best_particle)
-      .def_readonly("effective_sample_size", &PyEstimate::effective_sample_size)
-      .def_readonly("associations", &PyEstimate::associations)
-      .def_readonly("map", &PyEstimate::map)
+      .def_property_readonly("time", [](const PyEstimate& p) { return p.e.time; })
+      .def_property_readonly(
+          "mean_pose",
+          [](PyEstimate& p) -> py::array {
+            return lazy(p.mean_pose, [&] { return copy_array(p.e.mean_pose, {5}); });
+          })
+      .def_property_readonly(
+          "covariance",
+          [](PyEstimate& p) -> py::array {
+            return lazy(p.covariance, [&] { return copy_array(p.e.pose_covariance, {3, 3}); });
+          })
+      .def_property_readonly(
+          "best_pose",
+          [](PyEstimate& p) -> py::array {
+            return lazy(p.best_pose, [&] { return copy_array(p.e.best_pose, {5}); });
+          })
+      .def_property_readonly("best_particle", [](const PyEstimate& p) { return p.e.best_particle; })
+      .def_property_readonly("effective_sample_size",
+                             [](const PyEstimate& p) { return p.e.effective_sample_size; })
+      .def_property_readonly(
+          "associations",
+          [](PyEstimate& p) -> py::array {
+            return lazy(p.associations, [&] { return association_array(p.e.associations); });
+          })
+      .def_property_readonly(
+          "map",
+          [](PyEstimate& p) -> py::array {
+            return lazy(p.map, [&] { return py::array(map_array(p.e.map)); });
+          })
       .def("__repr__", &repr);
 
   py::class_<PyFilter>(m, "Filter", kFilterDoc)
@@ -391,6 +419,35 @@ meaning: speed and steering angle for the cars, v and omega for the unicycle). W
 filter's clock becomes t (not before the clock); without, it advances by dt. ValueError for a
 non-finite value, dt < 0, t going backwards or u not of 2 values. O(1) amortised: the work
 happens in the next observe() or estimate().)doc")
+      .def(
+          "predict",
+          [](PyFilter& self, const py::array_t<double, py::array::c_style | py::array::forcecast>& u,
+             const py::array_t<double, py::array::c_style | py::array::forcecast>& dt,
+             const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>&
+                 t) {
+            if (u.ndim() != 2 || u.shape(1) != 2) {
+              throw std::invalid_argument(
+                  "predict: a batch of controls u must have shape (K, 2), not " +
+                  py::str(u.attr("shape")).cast<std::string>());
+            }
+            const auto k = static_cast<std::size_t>(u.shape(0));
+            if (dt.ndim() != 1 || (t && t->ndim() != 1)) {
+              throw std::invalid_argument("predict: with controls of shape (K, 2), dt and t "
+                                          "must be one-dimensional arrays of K values");
+            }
+            static_assert(sizeof(engine::Control) == 2 * sizeof(double));
+            const std::span<const engine::Control> controls(
+                reinterpret_cast<const engine::Control*>(u.data()), k);
+            const std::span<const double> dts(dt.data(), static_cast<std::size_t>(dt.size()));
+            const std::span<const double> times =
+                t ? std::span<const double>(t->data(), static_cast<std::size_t>(t->size()))
+                  : std::span<const double>();
+            self.call([&](engine::Filter& f) { f.predict(controls, dts, times); });
+          },
+          py::arg("u"), py::arg("dt"), py::arg("t") = py::none(),
+          R"doc(The batch form: u of shape (K, 2), dt (and t, if given) of K values queue K
+controls in one call, as K calls would, for the odometry between two scans. All or nothing:
+ValueError naming the first bad control, and none is queued. O(K).)doc")
       .def(
           "observe",
           [](PyFilter& self, const py::object& ranges, const py::object& bearings,

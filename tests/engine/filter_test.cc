@@ -1302,6 +1302,52 @@ TEST(FilterClockTest, TimesSetTheClockAndMayNotGoBackwards) {
   EXPECT_THROW(copy->observe({}, 6.0), std::invalid_argument);  // and so is "timed"
 }
 
+// The batch form queues exactly what one call per control queues (the saved states are
+// equal, bytes for bytes), timed or not, and refuses all or nothing, naming the index.
+TEST(FilterBatchPredictTest, EqualsOneCallPerControlAndRefusesAllOrNothing) {
+  const Scenario& s = loop_scenario();
+  for (const bool timed : {false, true}) {
+    Filter one(base_config(Algorithm::kFastSlam1, 10));
+    Filter batch(base_config(Algorithm::kFastSlam1, 10));
+    std::vector<Control> controls;
+    std::vector<double> dts, times;
+    double t = 3.0;
+    for (const Event& e : s.events) {
+      if (!e.is_scan) {
+        t += e.dt;
+        if (timed) {
+          one.predict(e.control, e.dt, t);
+        } else {
+          one.predict(e.control, e.dt);
+        }
+        controls.push_back(e.control);
+        dts.push_back(e.dt);
+        times.push_back(t);
+        continue;
+      }
+      batch.predict(controls, dts, timed ? std::span<const double>(times) : std::span<const double>());
+      controls.clear();
+      dts.clear();
+      times.clear();
+      one.observe(e.scan);
+      batch.observe(e.scan);
+    }
+    ASSERT_TRUE(saved(one) == saved(batch)) << (timed ? "timed" : "untimed");
+    // A bad control in the middle, a time going backwards, unequal lengths: nothing queued.
+    const std::string before = saved(batch);
+    const std::vector<Control> three = {{1.0, 0.0}, {kNaN, 0.0}, {1.0, 0.0}};
+    const std::vector<double> dt3 = {0.1, 0.1, 0.1};
+    expect_throw_with<std::invalid_argument>([&] { batch.predict(three, dt3); }, "control 1: ");
+    const std::vector<Control> good = {{1.0, 0.0}, {1.0, 0.0}, {1.0, 0.0}};
+    const std::vector<double> backwards = {1e6, 1e6 + 1, 1e6};
+    expect_throw_with<std::invalid_argument>([&] { batch.predict(good, dt3, backwards); },
+                                             "control 2: Filter: time goes backwards");
+    expect_throw_with<std::invalid_argument>(
+        [&] { batch.predict(good, std::span<const double>(dt3).first(2)); }, "durations");
+    EXPECT_TRUE(saved(batch) == before) << "a refused batch changed the state";
+  }
+}
+
 // The landmarks of particle i's map by id.
 std::map<std::uint64_t, memory::Landmark> landmarks_by_id(const memory::ParticleStore& store,
                                                           std::size_t i) {

@@ -1,7 +1,7 @@
 # Type stubs of the extension module (bindings/python/*.cc): keep them in step with the
 # bindings; tests/bindings/python/test_stubs.py checks that every name and method exists.
 from os import PathLike
-from typing import Any, Iterator, Optional, Sequence, Union
+from typing import Any, Iterator, Optional, Sequence, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -43,7 +43,10 @@ class Filter:
     def __init__(self, config: Optional[dict[str, Any]] = None, **overrides: Any) -> None: ...
     @property
     def config(self) -> dict[str, Any]: ...
+    @overload
     def predict(self, u: _Numbers, dt: float, t: Optional[float] = None) -> None: ...
+    @overload
+    def predict(self, u: npt.ArrayLike, dt: npt.ArrayLike, t: Optional[npt.ArrayLike] = None) -> None: ...
     def observe(
         self,
         ranges: _Numbers,

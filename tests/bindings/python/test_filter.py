@@ -178,3 +178,32 @@ def test_gil_released(loop_log):
     inside = [t for t in ticks if window["start"] < t < window["end"]]
     assert window["end"] - window["start"] > 0.02
     assert len(inside) >= 5, (len(inside), window["end"] - window["start"])
+
+
+def test_batch_predict_equals_one_call_per_control(config, log):
+    """predict(U, DT, t=T) queues what K calls queue (the states are equal, byte for byte), and
+    refuses all or nothing, naming the control."""
+    one = fastslam.Filter(config)
+    batch = fastslam.Filter(config)
+    us, dts, ts = [], [], []
+    for r in log.records():
+        if isinstance(r, fastslam.Control):
+            one.predict(r.u, r.dt, t=r.t)
+            us.append(r.u)
+            dts.append(r.dt)
+            ts.append(r.t)
+        elif isinstance(r, fastslam.Scan):
+            batch.predict(np.array(us).reshape(-1, 2), np.array(dts), t=np.array(ts))
+            us, dts, ts = [], [], []
+            one.observe(r.ranges, r.bearings, r.ids, t=r.t)
+            batch.observe(r.ranges, r.bearings, r.ids, t=r.t)
+    batch.predict(np.array(us).reshape(-1, 2), np.array(dts), t=np.array(ts))
+    assert one.to_bytes() == batch.to_bytes()
+    before = batch.to_bytes()
+    with pytest.raises(ValueError, match="control 1: .*finite"):
+        batch.predict(np.array([[1.0, 0.0], [np.nan, 0.0]]), np.array([0.1, 0.1]))
+    with pytest.raises(ValueError, match="durations"):
+        batch.predict(np.array([[1.0, 0.0], [1.0, 0.0]]), np.array([0.1]))
+    with pytest.raises(ValueError, match=r"shape \(K, 2\)"):
+        batch.predict(np.zeros((3, 3)), np.zeros(3))
+    assert batch.to_bytes() == before
