@@ -276,8 +276,9 @@ def render(data):
         r = fronts["result"]
         lines += ["## Front ends", "",
                   f"Measured {fronts['date']} on {fronts['machine']}: {r['case']}; the same "
-                  "scan-by-scan pass (predict per control; observe, then the estimate with the "
-                  "map and the scan's associations, per scan) through each front end, the log "
+                  "scan-by-scan pass through each front end (C++ and C: predict per control; "
+                  "Python: one batch predict of the controls since the last scan; then observe "
+                  "and the estimate with the map and the scan's associations, per scan), the log "
                   f"read into memory first; median and minimum of {r['repeats']} whole runs, "
                   "interleaved; all three end on the same pose, bit for bit. Overhead = median / "
                   "C++'s median - 1.", "",
