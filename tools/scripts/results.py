@@ -284,7 +284,9 @@ def render(data):
                   "C++'s median - 1.", "",
                   f"`{fronts['command']}`", "",
                   "| front end | median | min | overhead |", "|---|---|---|---|"]
-        for name, v in r["front_ends"].items():
+        order = ["C++", "C", "Python"]  # results.json keeps keys sorted
+        for name, v in sorted(r["front_ends"].items(),
+                              key=lambda item: order.index(item[0]) if item[0] in order else 9):
             lines.append(f"| {name} | {1e3 * v['median_seconds']:.2f} ms | "
                          f"{1e3 * v['min_seconds']:.2f} ms | {100 * v['overhead']:.1f} % |")
         lines.append("")
