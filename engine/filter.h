@@ -15,13 +15,16 @@
 // docs/engine.md describes the algorithm and the stages a step runs through.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
 #include <span>
+#include <string_view>
 #include <vector>
 
+#include "engine/enum_names.h"
 #include "engine/filter_config.h"
 #include "memory/landmark_tree.h"
 #include "memory/particle_store.h"
@@ -62,6 +65,16 @@ enum class AssociationOutcome : std::uint8_t {
   // Left out of the map: EkfSlam's observations between its two gates (EkfConfig). FastSLAM
   // never discards one: an observation no landmark explains better than p0 starts a landmark.
   kDiscarded,
+};
+
+template <>
+struct EnumNames<AssociationOutcome> {
+  static constexpr std::string_view kWhat = "association outcome";
+  static constexpr std::array<EnumName<AssociationOutcome>, 3> kNames = {{
+      {AssociationOutcome::kAssociated, "associated"},
+      {AssociationOutcome::kNew, "new"},
+      {AssociationOutcome::kDiscarded, "discarded"},
+  }};
 };
 
 // One observation of the last scan, as the most likely particle took it.

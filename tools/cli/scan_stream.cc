@@ -24,18 +24,6 @@ void put(std::string& out, std::uint64_t v) {
   out.append(buf, r.ptr);
 }
 
-const char* outcome_name(engine::AssociationOutcome o) {
-  switch (o) {
-    case engine::AssociationOutcome::kAssociated:
-      return "associated";
-    case engine::AssociationOutcome::kNew:
-      return "new";
-    case engine::AssociationOutcome::kDiscarded:
-      return "discarded";
-  }
-  return "unknown";
-}
-
 }  // namespace
 
 ScanStream::ScanStream(const std::string& path) : path_(path) {
@@ -80,7 +68,7 @@ void ScanStream::write(double time, std::uint64_t scan, const engine::Estimate& 
     l += "{\"observation\":";
     put(l, static_cast<std::uint64_t>(a.observation));
     l += ",\"outcome\":\"";
-    l += outcome_name(a.outcome);
+    l += engine::enum_name(a.outcome);
     l += "\",\"id\":";
     put(l, a.landmark_id);
     l += ",\"mahalanobis2\":";

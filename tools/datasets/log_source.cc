@@ -14,9 +14,7 @@ LogSource::LogSource(Log log, std::string name, std::string summary,
   for (const Event& e : log_.events) info_.expected_controls += e.kind == EventKind::kControl;
   std::size_t labelled = 0;
   for (const engine::Observation& z : log_.observations) labelled += z.id >= 0;
-  info_.labels = labelled == log_.observations.size() ? Labels::kAll
-                 : labelled == 0                      ? Labels::kNone
-                                                      : Labels::kSome;
+  info_.labels = labels_of(labelled, log_.observations.size());
   info_.name = std::move(name);
   info_.summary = std::move(summary);
   info_.metrics = std::move(metrics);

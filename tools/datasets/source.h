@@ -9,6 +9,7 @@
 // Costs: `next` is O(observations of the event); opening costs what reading the data costs.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -51,6 +52,11 @@ struct FilterDefaults {
 
 // Which detections carry a landmark id.
 enum class Labels : std::uint8_t { kAll, kSome, kNone };
+
+// The Labels of `detections` of which `labelled` carry an id.
+constexpr Labels labels_of(std::size_t labelled, std::size_t detections) {
+  return labelled == detections ? Labels::kAll : labelled == 0 ? Labels::kNone : Labels::kSome;
+}
 
 // What a source knows before its first event.
 struct SourceInfo {

@@ -10,10 +10,6 @@ namespace {
 
 constexpr const char* kStdin = "<stdin>";
 
-Labels labels_of(std::size_t labelled, std::size_t all) {
-  return labelled == all ? Labels::kAll : labelled == 0 ? Labels::kNone : Labels::kSome;
-}
-
 std::unique_ptr<std::istream> open_file(const std::string& path) {
   auto file = std::make_unique<std::ifstream>(path);
   if (!*file) throw std::runtime_error(path + ": cannot open for reading");
