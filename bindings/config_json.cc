@@ -26,7 +26,7 @@ using Json = nlohmann::ordered_json;
 using engine::FilterConfig;
 
 // A field added to FilterConfig changes its size: add its key to visit_config, then update this.
-static_assert(sizeof(FilterConfig) == 336, "FilterConfig changed: update visit_config's keys");
+static_assert(sizeof(FilterConfig) == 344, "FilterConfig changed: update visit_config's keys");
 
 // FilterConfig's keys in struct order, for the reader and the writer alike, so the two cannot
 // drift apart. `C` is FilterConfig or const FilterConfig.
@@ -68,6 +68,7 @@ void visit_config(C& c, V& v) {
     e.field("seen", c.existence.seen);
     e.field("missed", c.existence.missed);
     e.field("remove_below", c.existence.remove_below);
+    e.field("confirm_at", c.existence.confirm_at);
     e.field("range_margin", c.existence.range_margin);
   });
   v.object("resample", [&](V& r) {

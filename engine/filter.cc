@@ -244,7 +244,10 @@ Estimate Filter::estimate(EstimateMap map_part) {
   e.map_size = map.size();
   if (map_part == EstimateMap::kSizeOnly) return e;
   e.map.reserve(map.size());
+  const bool known_ids = impl_->state.config.association == Association::kKnown;
+  const double confirm_at = impl_->state.config.existence.confirm_at;
   for (const auto [slot, lm] : map) {
+    if (!known_ids && !(lm.log_odds >= confirm_at)) continue;
     e.map.push_back({slot, lm.id, lm.x, lm.y, lm.sxx, lm.sxy, lm.syy, lm.log_odds, lm.last_seen});
   }
   return e;

@@ -48,7 +48,8 @@ struct Observation {
 // A landmark of one particle's map, in that particle's world frame: its mean and covariance are
 // conditioned on that particle's path, so they agree with its pose (Estimate::best_pose), not
 // exactly with the weighted mean pose. `log_odds` is its existence (eq. 73-75; unknown
-// association: below ExistenceConfig::remove_below it is removed).
+// association: below ExistenceConfig::remove_below it is removed, below confirm_at it is
+// provisional and left out of Estimate::map).
 struct MapLandmark {
   memory::Slot slot = 0;
   std::uint64_t id = 0;
@@ -110,8 +111,12 @@ struct Estimate {
   // landmarks are shared by the copies a map was resampled into, so they name the same
   // landmarks in `map` wherever that particle's lineage and the best particle's agree.
   std::vector<ObservationAssociation> associations;
-  std::vector<MapLandmark> map;  // the best particle's map, in slot order (EstimateMap::kCopy)
-  std::size_t map_size = 0;      // its landmarks, copied or not
+  // The best particle's confirmed landmarks, in slot order (EstimateMap::kCopy). With unknown
+  // association, its provisional ones (log-odds below ExistenceConfig::confirm_at) are left out.
+  std::vector<MapLandmark> map;
+  // The best particle's landmarks, provisional ones included, copied or not (O(1)):
+  // map.size() <= map_size.
+  std::size_t map_size = 0;
 };
 
 // Whether `estimate` copies the best particle's map (O(N)) or only counts it (O(1)).

@@ -50,7 +50,7 @@ void validate(const FilterConfig& c) {
   require(std::isfinite(c.log_new_landmark), "log_new_landmark must be finite");
   const ExistenceConfig& e = c.existence;
   require(std::isfinite(e.initial) && std::isfinite(e.seen) && std::isfinite(e.missed) &&
-              std::isfinite(e.remove_below),
+              std::isfinite(e.remove_below) && std::isfinite(e.confirm_at),
           "existence parameters must be finite");
   require(std::isfinite(e.range_margin) && e.range_margin >= 0,
           "existence.range_margin must be finite and >= 0");

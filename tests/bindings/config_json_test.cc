@@ -53,6 +53,7 @@ void expect_same(const FilterConfig& a, const FilterConfig& b) {
   FASTSLAM_SAME_BITS(existence.seen);
   FASTSLAM_SAME_BITS(existence.missed);
   FASTSLAM_SAME_BITS(existence.remove_below);
+  FASTSLAM_SAME_BITS(existence.confirm_at);
   FASTSLAM_SAME_BITS(existence.range_margin);
   FASTSLAM_SAME(resample.when);
   FASTSLAM_SAME_BITS(resample.ess_fraction);
@@ -94,6 +95,7 @@ FilterConfig unusual_config() {
   c.existence.seen = 0.7;
   c.existence.missed = 1e22;
   c.existence.remove_below = -1.5;
+  c.existence.confirm_at = 3.25;
   c.existence.range_margin = 0.0;
   c.resample.when = parallel::ResamplePolicy::When::kEveryStep;
   c.resample.ess_fraction = 0.1;
@@ -186,6 +188,7 @@ TEST(ConfigJson, WritesEveryKey) {
                                           "existence.seen",
                                           "existence.missed",
                                           "existence.remove_below",
+                                          "existence.confirm_at",
                                           "existence.range_margin",
                                           "resample.when",
                                           "resample.ess_fraction",

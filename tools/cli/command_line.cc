@@ -335,6 +335,10 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "log-odds a landmark loses when in view and not seen (ml, das)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd.add_option("--existence-confirm-at", f.existence.confirm_at,
+                 "log-odds from which a landmark is in the reported map; below, it is "
+                 "provisional (ml, das)")
+      ->capture_default_str();
   cmd.add_option("--existence-range-margin", f.existence.range_margin,
                  "metres inside the sensor range where a missed landmark counts (ml, das)")
       ->check(CLI::NonNegativeNumber)
