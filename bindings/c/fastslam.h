@@ -90,7 +90,7 @@ typedef struct fastslam_estimate {
   double best_pose[5];       /* the pose of the particle of highest weight */
   uint32_t best_particle;
   double effective_sample_size; /* 1 / sum of squared normalised weights, in [1, particles] */
-  size_t landmark_count;        /* landmarks in the best particle's map (fastslam_get_map) */
+  size_t landmark_count;        /* the best particle's confirmed landmarks (fastslam_get_map) */
   size_t observation_count;     /* observations of the last scan (fastslam_get_associations) */
 } fastslam_estimate;
 
