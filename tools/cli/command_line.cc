@@ -245,6 +245,7 @@ void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::s
     CLI::Option* option = key == "config" ? nullptr : cmd.get_option_no_throw("--" + key);
     if (option == nullptr) fail("unknown option (keys are the long flag names without '--')");
     if (option->count() > 0) continue;  // given on the command line: the flag wins
+    if (value.is_null()) continue;       // unset, as metrics.json's "options" writes "none"
     std::string text;
     if (value.is_string()) {
       text = value.get<std::string>();
@@ -269,6 +270,7 @@ void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::s
 
 void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   const bool csv = !o.landmarks_csv.empty();
+  o.config = w.config;
   o.sim.loops = w.loops > 0 ? w.loops : (csv ? 2 : 1);
   o.filter.algorithm = engine::parse_enum<Algorithm>(w.algorithm);
   o.filter.resample.when = engine::parse_enum<ResamplePolicy::When>(w.resample);

@@ -4,7 +4,8 @@
 // the `fastslam` executable and its tests.
 //
 // Config files: one JSON object whose keys are the long flag names without the dashes
-// ("particles", "landmarks-csv", "no-progress", ...), values numbers, strings or booleans. A
+// ("particles", "landmarks-csv", "no-progress", ...), values numbers, strings or booleans (null:
+// not set, as metrics.json's "options" writes an option that means "none"). A
 // flag given on the command line wins over the file; an unknown key, a nested value or a value
 // the flag's check refuses is an error naming the file and the key.
 //

@@ -21,8 +21,10 @@
 #include "engine/ekf_slam.h"
 #include "engine/enum_names.h"
 #include "engine/filter.h"
+#include "tools/cli/build_info.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
+#include "tools/cli/run_provenance.h"
 #include "tools/cli/run_recorder.h"
 #include "tools/cli/run_report.h"
 #include "tools/cli/scan_stream.h"
@@ -419,6 +421,8 @@ int run_simulation(const RunOptions& options) {
 }
 
 nlohmann::json run_once(const RunOptions& options) {
+  // Hashed before the source reads them: what this run is about to read.
+  nlohmann::json inputs = options.hash_inputs ? input_files_json(options) : nlohmann::json();
   RunResult r;
   const auto t_open = Clock::now();
   const SourceEntry& entry = find_source(options.source);
@@ -462,6 +466,10 @@ nlohmann::json run_once(const RunOptions& options) {
   }
   const RunSettings settings{resolved, info, config, association, particles};
   nlohmann::json metrics = metrics_json(settings, r);
+  metrics["schema_version"] = kMetricsSchemaVersion;
+  metrics["build"] = build_info_json();
+  metrics["options"] = resolved_options_json(resolved, config, association.mode);
+  if (options.hash_inputs) metrics["inputs"] = std::move(inputs);
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;
   if (!options.quiet) print_summary(settings, r, text);
