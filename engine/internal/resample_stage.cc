@@ -30,8 +30,9 @@ void ResampleStage::run(FilterState& state, std::uint64_t scan_step, bool heavy)
     counters.log_evidence += outcome.before.log_sum;
   } catch (const std::invalid_argument& e) {
     // Not std::invalid_argument, whose contract is "unchanged": the scan has been applied.
-    throw std::runtime_error(std::string("Filter::observe: numerical failure after scan ") +
-                             std::to_string(scan_step) + ": " + e.what());
+    throw std::runtime_error("Filter::observe: numerical failure in scan " +
+                             std::to_string(counters.scans) + " (step " +
+                             std::to_string(scan_step) + "): " + e.what());
   } catch (const std::domain_error&) {
     // The maps already hold the scan; start the weights afresh rather than stop.
     parallel::reset_log_weights(state.store.log_weight(), kernel_);

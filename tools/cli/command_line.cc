@@ -1,8 +1,14 @@
 #include "tools/cli/command_line.h"
 
+#include <algorithm>
+#include <charconv>
 #include <fstream>
+#include <limits>
 #include <numbers>
+#include <set>
 #include <stdexcept>
+#include <sys/resource.h>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -17,6 +23,39 @@ using engine::Association;
 using parallel::ResamplePolicy;
 using parallel::ResampleScheme;
 
+// At most this much of a bad value is quoted back.
+constexpr std::size_t kMaxQuoted = 80;
+
+std::string clip(const std::string& text) {
+  if (text.size() <= kMaxQuoted) return text;
+  return text.substr(0, kMaxQuoted) + "... (" + std::to_string(text.size()) + " bytes)";
+}
+
+// Decimal integers within T's range, checked on the text: CLI11's own conversion clamps
+// 18446744073709551616 to 2^64 - 1 and wraps -1 round to it for unsigned options.
+template <class T>
+CLI::Validator whole_number() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        T value{};
+        const char* const first = text.data();
+        const char* const last = first + text.size();
+        const auto [end, ec] = std::from_chars(first, last, value);
+        const bool digits = !text.empty() && std::all_of(text.begin() + (text[0] == '-'),
+                                                         text.end(), [](char c) {
+                                                           return c >= '0' && c <= '9';
+                                                         }) && text != "-";
+        if (ec == std::errc() && end == last) return {};
+        if (digits && (ec == std::errc::result_out_of_range || text[0] == '-')) {
+          return "'" + clip(text) + "' is out of range (" +
+                 std::to_string(std::numeric_limits<T>::min()) + " to " +
+                 std::to_string(std::numeric_limits<T>::max()) + ")";
+        }
+        return "'" + clip(text) + "' is not a decimal integer";
+      },
+      "INT", "whole number");
+}
+
 // The world of a simulated source (shared by run and convert).
 void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--landmarks-csv", o.landmarks_csv,
@@ -29,6 +68,7 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::IsMember({"grid", "loop"}))
       ->capture_default_str();
   cmd.add_option("--landmarks", o.landmarks, "landmarks of a grid world")
+      ->check(whole_number<std::uint64_t>())
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{100'000'000}))
       ->capture_default_str();
   cmd.add_option("--spacing", w.spacing,
@@ -60,6 +100,7 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->capture_default_str();
   cmd.add_option("--loops", w.loops,
                  "times the route is driven (default: 2 for CSV worlds, 1 else)")
+      ->check(whole_number<int>())
       ->check(CLI::Range(1, 1000));
   cmd.add_option("--at-waypoint", o.sim.at_waypoint,
                  "metres within which the simulated car has reached a waypoint")
@@ -95,6 +136,7 @@ void add_config_option(CLI::App& cmd, RunWords& w) {
 // The UTIAS MRCLAM reader's options (run and convert).
 void add_utias_options(CLI::App& cmd, RunOptions& o) {
   cmd.add_option("--robot", o.utias.robot, "utias: the robot whose run is read (1-5)")
+      ->check(whole_number<int>())
       ->check(CLI::Range(1, kUtiasRobots))
       ->capture_default_str();
 }
@@ -167,6 +209,7 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::IsMember(motion_choices()))
       ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")
+      ->check(whole_number<std::uint32_t>())
       ->check(CLI::Range(1U, 100'000'000U))
       ->capture_default_str();
   cmd.add_option("--association", o.association,
@@ -217,19 +260,55 @@ void add_convert_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "a recorded source's file or directory, e.g. ../shared/data/victoria_park")
       ->check(CLI::ExistingPath);
   add_world_options(cmd, o, w);
-  cmd.add_option("--seed", o.filter.seed, "random seed of the simulation")->capture_default_str();
+  cmd.add_option("--seed", o.filter.seed, "random seed of the simulation")
+      ->check(whole_number<std::uint64_t>())
+      ->capture_default_str();
   add_victoria_park_options(cmd, o, w);
   add_utias_options(cmd, o);
   cmd.add_option("--out", o.out, "the log file to write (docs/log-format.md); required");
   add_config_option(cmd, w);
 }
 
+unsigned max_startable_threads() {
+  const std::uint64_t cores = std::max(1U, std::thread::hardware_concurrency());
+  std::uint64_t limit = kMaxThreadsPerCore * cores;
+  rlimit space{};
+  if (::getrlimit(RLIMIT_AS, &space) == 0 && space.rlim_cur != RLIM_INFINITY) {
+    // Half the address space for stacks; the map and the heap need the rest.
+    limit = std::min<std::uint64_t>(limit, space.rlim_cur / 2 / kThreadStackBytes);
+  }
+  rlimit processes{};
+  if (::getrlimit(RLIMIT_NPROC, &processes) == 0 && processes.rlim_cur != RLIM_INFINITY) {
+    limit = std::min<std::uint64_t>(limit, processes.rlim_cur);
+  }
+  return static_cast<unsigned>(std::max<std::uint64_t>(1, limit));
+}
+
+std::string threads_refusal(unsigned threads) {
+  return "--threads " + std::to_string(threads) + ": more than this process can usefully start (" +
+         std::to_string(max_startable_threads()) + ": " + std::to_string(kMaxThreadsPerCore) +
+         " per core of " + std::to_string(std::max(1U, std::thread::hardware_concurrency())) +
+         ", within the address-space and process limits); give at most that, or 0 for one per "
+         "core";
+}
+
 void apply_json_config(CLI::App& cmd, const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open for reading");
   nlohmann::json config;
+  // A key given twice would otherwise resolve silently to its last value.
+  std::set<std::string> keys;
+  const auto refuse_repeats = [&](int depth, nlohmann::json::parse_event_t event,
+                                  nlohmann::json& parsed) {
+    if (depth == 1 && event == nlohmann::json::parse_event_t::key &&
+        !keys.insert(parsed.get<std::string>()).second) {
+      throw std::runtime_error(path + ": key '" + clip(parsed.get<std::string>()) +
+                               "' is repeated: give each option once");
+    }
+    return true;
+  };
   try {
-    config = nlohmann::json::parse(in);
+    config = nlohmann::json::parse(in, refuse_repeats);
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(path + ": not valid JSON: " + e.what());
   }
@@ -245,6 +324,7 @@ void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::s
     CLI::Option* option = key == "config" ? nullptr : cmd.get_option_no_throw("--" + key);
     if (option == nullptr) fail("unknown option (keys are the long flag names without '--')");
     if (option->count() > 0) continue;  // given on the command line: the flag wins
+    if (value.is_null()) continue;       // unset, as metrics.json's "options" writes "none"
     std::string text;
     if (value.is_string()) {
       text = value.get<std::string>();
@@ -269,6 +349,15 @@ void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::s
 
 void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   const bool csv = !o.landmarks_csv.empty();
+  o.config = w.config;
+  const CLI::Option* out = cmd.get_option_no_throw("--out");
+  if (out != nullptr && out->count() > 0 && o.out.empty()) {
+    throw std::invalid_argument(
+        "--out \"\" names no path: give a directory (a file for convert), or leave --out out");
+  }
+  if (o.filter.threads > max_startable_threads()) {
+    throw std::invalid_argument(threads_refusal(o.filter.threads));
+  }
   o.sim.loops = w.loops > 0 ? w.loops : (csv ? 2 : 1);
   o.filter.algorithm = engine::parse_enum<Algorithm>(w.algorithm);
   o.filter.resample.when = engine::parse_enum<ResamplePolicy::When>(w.resample);
@@ -376,14 +465,19 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
 void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   engine::FilterConfig& f = o.filter;
   cmd.add_option("--seed", f.seed, "random seed (the whole run is a function of it)")
+      ->check(whole_number<std::uint64_t>())
       ->capture_default_str();
   cmd.add_option("--seeds", w.seeds,
                  "run once per seed (e.g. 1-10 or 1,3,7-9), each into OUT/seed-S, and "
                  "summarise the metrics over them in OUT/sweep.json and sweep.csv");
-  cmd.add_option("--threads", f.threads, "worker threads (0: all cores)")
+  cmd.add_option("--threads", f.threads,
+                 "worker threads (0: all cores; at most 16 per core, and what the address-space "
+                 "limit leaves room for)")
+      ->check(whole_number<unsigned>())
       ->check(CLI::Range(0U, 4096U))
       ->capture_default_str();
   cmd.add_option("--grain", f.grain, "particles per parallel task")
+      ->check(whole_number<std::size_t>())
       ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 30))
       ->capture_default_str();
   cmd.add_option("--split-seconds", f.split_seconds,
@@ -417,11 +511,13 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "output (the summary then goes to standard error)");
   cmd.add_option("--max-steps", w.max_steps,
                  "stop after this many controls and report what the run has (default: none)")
+      ->check(whole_number<std::uint64_t>())
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 62));
   cmd.add_option("--max-seconds", w.max_seconds,
                  "stop after this much wall time and report what the run has (default: none)")
       ->check(CLI::PositiveNumber);
   cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
+      ->check(whole_number<std::uint64_t>())
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
       ->capture_default_str();
   cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");

@@ -4,7 +4,8 @@
 // the `fastslam` executable and its tests.
 //
 // Config files: one JSON object whose keys are the long flag names without the dashes
-// ("particles", "landmarks-csv", "no-progress", ...), values numbers, strings or booleans. A
+// ("particles", "landmarks-csv", "no-progress", ...), values numbers, strings or booleans (null:
+// not set, as metrics.json's "options" writes an option that means "none"). A
 // flag given on the command line wins over the file; an unknown key, a nested value or a value
 // the flag's check refuses is an error naming the file and the key.
 //
@@ -48,15 +49,27 @@ void add_run_options(CLI::App& cmd, RunOptions& options, RunWords& words);
 // Binds the options of `fastslam convert` (source, world, seed, --data, --out FILE.log).
 void add_convert_options(CLI::App& cmd, RunOptions& options, RunWords& words);
 
+// --threads beyond this is refused before any thread starts: kMaxThreadsPerCore per hardware
+// thread (more only adds switching: the work is split per particle block), fewer when the
+// address-space limit (ulimit -v) leaves room for fewer stacks of kThreadStackBytes (TBB's
+// default worker stack) in half of it, or the process limit (ulimit -u) is lower. Costs: two
+// getrlimit calls.
+inline constexpr std::uint64_t kMaxThreadsPerCore = 16;
+inline constexpr std::uint64_t kThreadStackBytes = std::uint64_t{4} << 20;
+unsigned max_startable_threads();
+// The message refusing `threads`: the limit and where it comes from.
+std::string threads_refusal(unsigned threads);
+
 // Applies the JSON config file to every option of `cmd` not given on its command line.
-// Throws std::runtime_error "<file>: ..." naming the key on an unknown key or a bad value.
+// Throws std::runtime_error "<file>: ..." naming the key on an unknown, repeated or bad key.
 void apply_json_config(CLI::App& cmd, const std::string& path);
 // The same for a JSON object already in memory (the Python module's keyword arguments);
 // `where` stands for the file in messages.
 void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::string& where);
 
 // After parsing (and the config): the words into enums, the loops default, the noise overrides
-// that were given. Reads `cmd` to see which options were given.
+// that were given. Reads `cmd` to see which options were given. Throws std::invalid_argument
+// for `--out ""` and for more threads than max_startable_threads().
 void finish_run_options(const CLI::App& cmd, const RunWords& words, RunOptions& options);
 
 }  // namespace fastslam::tools

@@ -11,6 +11,7 @@
 
 #include "engine/enum_names.h"
 #include "engine/filter_config.h"
+#include "tools/cli/build_info.h"
 #include "tools/cli/command_line.h"
 #include "tools/cli/run_sweep.h"
 #include "tools/cli/run_command.h"
@@ -128,6 +129,8 @@ int main(int argc, char** argv) {
   namespace tools = fastslam::tools;
   CLI::App app{"fastslam: a parallel, high-throughput FastSLAM 1.0/2.0 engine"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", [] { return fastslam::tools::version_text(); },
+                       "print the version, git commit, build type, compiler and SIMD level");
 
   tools::RunOptions run;
   tools::RunWords words;

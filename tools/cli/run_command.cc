@@ -21,8 +21,10 @@
 #include "engine/ekf_slam.h"
 #include "engine/enum_names.h"
 #include "engine/filter.h"
+#include "tools/cli/build_info.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
+#include "tools/cli/run_provenance.h"
 #include "tools/cli/run_recorder.h"
 #include "tools/cli/run_report.h"
 #include "tools/cli/scan_stream.h"
@@ -160,10 +162,9 @@ void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth,
 }
 
 // The scan as the filter takes it: under mixed association without its unlabelled detections
-// (counted); under known association a detection without an id is an error naming the source's
-// record and time, and the options that accept it.
-void prepare_scan(const RunLoop& loop, std::uint64_t event, double time,
-                  std::vector<engine::Observation>& scan, RunResult& r) {
+// (counted); under known association a detection without an id is refused
+// (std::invalid_argument; drive() names the record) with the options that accept it.
+void prepare_scan(const RunLoop& loop, std::vector<engine::Observation>& scan, RunResult& r) {
   if (loop.association.discard_unlabelled) {
     const auto unlabelled = std::remove_if(scan.begin(), scan.end(),
                                            [](const engine::Observation& z) { return z.id < 0; });
@@ -174,13 +175,28 @@ void prepare_scan(const RunLoop& loop, std::uint64_t event, double time,
   if (loop.association.engine != engine::Association::kKnown) return;
   for (std::size_t j = 0; j < scan.size(); ++j) {
     if (scan[j].id >= 0) continue;
-    char when[64];
-    std::snprintf(when, sizeof(when), " (scan at t = %.3f s)", time);
-    throw std::runtime_error(loop.source.where(event) + when + ": detection " + std::to_string(j) +
-                             " has no landmark id ('-'), which known association needs. Run with "
-                             "--association auto or ml to associate every detection, or mixed "
-                             "to use the ids given and discard the rest");
+    throw std::invalid_argument("detection " + std::to_string(j) +
+                                " has no landmark id ('-'), which known association needs. Run "
+                                "with --association auto or ml to associate every detection, or "
+                                "mixed to use the ids given and discard the rest");
   }
+}
+
+// "FILE:LINE (scan 200, t = 40.000 s)": the source's record (its file and line, or its event
+// number), the scan's or control's ordinal in the run (from 1) and the time, for errors raised
+// while the run processes that record.
+std::string record_of(const RunLoop& loop, std::uint64_t index, const Event& event,
+                      std::uint64_t controls, std::uint64_t scans) {
+  const char* kind = event.kind == EventKind::kScan      ? "scan"
+                     : event.kind == EventKind::kControl ? "control"
+                                                         : "record";
+  const std::uint64_t ordinal = event.kind == EventKind::kScan      ? scans + 1
+                                : event.kind == EventKind::kControl ? controls + 1
+                                                                    : index + 1;
+  char what[96];
+  std::snprintf(what, sizeof(what), " (%s %llu, t = %.3f s)", kind,
+                static_cast<unsigned long long>(ordinal), event.time);
+  return loop.source.where(index) + what;
 }
 
 // One loop over the events of any source, the same for the FastSLAM `Filter` and the `EkfSlam`
@@ -211,21 +227,37 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     }
     const auto t1 = Clock::now();
     double trace_seconds = 0.0;
-    try {
+    // What the filter refuses (std::invalid_argument: the record, the filter unchanged) or fails
+    // on (std::runtime_error: a numerical failure) is rethrown naming the record.
+    const auto located = [&](auto&& call) {
+      try {
+        call();
+      } catch (const std::exception& e) {
+        if (dynamic_cast<const std::invalid_argument*>(&e) == nullptr &&
+            dynamic_cast<const std::runtime_error*>(&e) == nullptr) {
+          throw;
+        }
+        throw std::runtime_error(record_of(loop, index, event, controls, scans) + ": " +
+                                 e.what());
+      }
+    };
+    {
       switch (event.kind) {
         case EventKind::kControl:
           if (loop.options.max_steps && controls == *loop.options.max_steps) {
             r.ended_by = "--max-steps";
             break;
           }
-          filter.predict(event.control, event.dt, event.time);
+          located([&] { filter.predict(event.control, event.dt, event.time); });
           ++controls;
           loop.recorder.control(event);
           break;
         case EventKind::kScan:
-          prepare_scan(loop, index, event.time, scan, r);
+          located([&] {
+            prepare_scan(loop, scan, r);
+            filter.observe(scan, event.time);
+          });
           loop.truth.see(scan);
-          filter.observe(scan, event.time);
           loop.recorder.estimates(filter.take_trajectory());
           if (loop.stream != nullptr) {
             loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
@@ -250,10 +282,6 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
           loop.recorder.gps(event);
           break;
       }
-    } catch (const std::invalid_argument& e) {
-      char when[64];
-      std::snprintf(when, sizeof(when), " (t = %.3f s): ", event.time);
-      throw std::runtime_error(loop.source.where(index) + when + e.what());
     }
     r.source_seconds += std::chrono::duration<double>(t1 - t0).count();
     r.filter_seconds += seconds_since(t1);
@@ -419,6 +447,8 @@ int run_simulation(const RunOptions& options) {
 }
 
 nlohmann::json run_once(const RunOptions& options) {
+  // Hashed before the source reads them: what this run is about to read.
+  nlohmann::json inputs = options.hash_inputs ? input_files_json(options) : nlohmann::json();
   RunResult r;
   const auto t_open = Clock::now();
   const SourceEntry& entry = find_source(options.source);
@@ -462,6 +492,10 @@ nlohmann::json run_once(const RunOptions& options) {
   }
   const RunSettings settings{resolved, info, config, association, particles};
   nlohmann::json metrics = metrics_json(settings, r);
+  metrics["schema_version"] = kMetricsSchemaVersion;
+  metrics["build"] = build_info_json();
+  metrics["options"] = resolved_options_json(resolved, config, association.mode);
+  if (options.hash_inputs) metrics["inputs"] = std::move(inputs);
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;
   if (!options.quiet) print_summary(settings, r, text);

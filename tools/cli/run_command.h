@@ -119,6 +119,11 @@ struct RunOptions {
   std::string plot_script;
   // No summary on stdout (the Python module's run(), whose caller reads the metrics).
   bool quiet = false;
+  // The --config file the options came from, recorded (and hashed) in metrics.json.
+  std::string config;
+  // metrics.json's "inputs": the SHA-256 of each input file (tools/cli/run_provenance.h). A
+  // sweep hashes once for all its seeds and turns this off for each run.
+  bool hash_inputs = true;
 };
 
 // The plot script `fastslam run` uses by default: $FASTSLAM_PLOT_SCRIPT when set, else this

@@ -12,6 +12,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tools/cli/run_provenance.h"
+
 namespace fastslam::tools {
 namespace {
 
@@ -111,16 +113,28 @@ nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed) {
 int run_sweep(const RunOptions& options) {
   const std::vector<std::uint64_t>& seeds = options.seeds;
   if (seeds.empty()) throw std::invalid_argument("--seeds: no seed given");
+  // The provenance once for the sweep, not per seed: the inputs hashed once, the build and the
+  // options (the first seed's, with the sweep's seeds and output directory) taken off each run.
+  nlohmann::json provenance = {{"inputs", input_files_json(options)}};
   std::vector<nlohmann::json> per_seed;
   for (const std::uint64_t seed : seeds) {
     RunOptions o = options;
     o.filter.seed = seed;
+    o.hash_inputs = false;
     if (!options.out.empty()) o.out = options.out + "/seed-" + std::to_string(seed);
     std::printf("== seed %llu\n", static_cast<unsigned long long>(seed));
     std::fflush(stdout);
     per_seed.push_back(run_once(o));
-    per_seed.back()["seed"] = seed;
+    nlohmann::json& m = per_seed.back();
+    m["seed"] = seed;
+    for (const char* key : {"schema_version", "build", "options"}) {
+      if (!provenance.contains(key)) provenance[key] = m[key];
+      m.erase(key);
+    }
   }
+  provenance["options"]["seed"] = nullptr;
+  provenance["options"]["seeds"] = seeds;
+  provenance["options"]["out"] = options.out;
   const nlohmann::json summary = summarise_seeds(per_seed);
   std::printf("== %zu seeds: mean / median / worst (max) / stdev\n", seeds.size());
   for (const char* key : kHeadline) {
@@ -133,8 +147,11 @@ int run_sweep(const RunOptions& options) {
   std::filesystem::create_directories(options.out);
   {
     std::ofstream json(options.out + "/sweep.json");
-    json << nlohmann::json{{"seeds", seeds}, {"summary", summary}, {"per_seed", per_seed}}.dump(2)
-         << '\n';
+    nlohmann::json sweep = std::move(provenance);
+    sweep["seeds"] = seeds;
+    sweep["summary"] = summary;
+    sweep["per_seed"] = per_seed;
+    json << sweep.dump(2) << '\n';
     if (!json) throw std::runtime_error("cannot write " + options.out + "/sweep.json");
   }
   std::set<std::string> columns;

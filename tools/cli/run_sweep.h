@@ -3,6 +3,8 @@
 // then every numeric metric is summarised over the seeds (mean, median, min, max, standard
 // deviation; booleans as the number of seeds where true) into OUT/sweep.json, with every seed's
 // metrics, and OUT/sweep.csv (a row per seed); a table of the headline errors goes to stdout.
+// sweep.json carries the provenance (tools/cli/run_provenance.h) once, at its top: the
+// inputs hashed once, the build, the options with every seed; the seeds' entries leave it out.
 //
 // Ownership: plain options in; files out. Thread safety: one sweep per call; seeds run one
 // after another, each with the options' threads (results do not depend on the thread count).

@@ -28,6 +28,26 @@ constexpr std::string_view kMagic = "fastslam-log";
 
 bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
 
+// A token for a message: whole up to kMaxQuotedBytes, else its start and its length, so a
+// megabyte of garbage does not become a megabyte of message.
+std::string clipped(std::string_view token) {
+  std::string out(token.substr(0, kMaxQuotedBytes));
+  if (token.size() > kMaxQuotedBytes) {
+    out.append("... (").append(std::to_string(token.size())).append(" bytes)");
+  }
+  return out;
+}
+std::string quoted(std::string_view token) {
+  std::string out(1, '\'');
+  out.append(token.substr(0, kMaxQuotedBytes));
+  out.push_back('\'');
+  if (token.size() > kMaxQuotedBytes) {
+    out.insert(out.size() - 1, "...");
+    out.append(" (").append(std::to_string(token.size())).append(" bytes)");
+  }
+  return out;
+}
+
 // Splits on spaces and tabs; a trailing '\r' is ignored.
 void tokenize(std::string_view line, std::vector<std::string_view>& out) {
   out.clear();
@@ -71,11 +91,15 @@ class LogReader::Parser {
         fields(5, "control T DT U0 U1");
         e.kind = EventKind::kControl;
         e.dt = number(2, "dt");
-        if (e.dt < 0) fail("dt is negative (" + std::string(tokens_[2]) + ")");
+        if (e.dt < 0) fail("dt is negative (" + clipped(tokens_[2]) + ")");
         e.control = {number(3, "u0"), number(4, "u1")};
       } else if (record == "scan") {
         if (tokens_.size() < 3) fail("scan needs 'scan T N' and N (range bearing id) triples");
         const std::uint64_t n = integer(2, "observation count");
+        if (n > kMaxScanObservations) {
+          fail("scan of " + std::to_string(n) + " observations: more than the format's limit of " +
+               std::to_string(kMaxScanObservations) + " (docs/log-format.md)");
+        }
         if (n > (tokens_.size() - 3) / 3 || tokens_.size() != 3 + 3 * n) {
           fail("scan of " + std::to_string(n) + " observations needs " + std::to_string(3 + 3 * n) +
                " fields, found " + std::to_string(tokens_.size()));
@@ -87,7 +111,7 @@ class LogReader::Parser {
           const std::size_t f = 3 + 3 * k;
           engine::Observation z;
           z.range = number(f, "range");
-          if (!(z.range > 0)) fail("range must be > 0 (got " + std::string(tokens_[f]) + ")");
+          if (!(z.range > 0)) fail("range must be > 0 (got " + clipped(tokens_[f]) + ")");
           z.bearing = number(f + 1, "bearing");
           z.id = tokens_[f + 2] == "-" ? -1 : static_cast<std::int64_t>(integer(f + 2, "id"));
           scan.push_back(z);
@@ -104,11 +128,11 @@ class LogReader::Parser {
         e.x = number(2, "x");
         e.y = number(3, "y");
       } else {
-        fail("unknown record '" + std::string(record) + "' (control, scan, pose, gps or landmark)");
+        fail("unknown record " + quoted(record) + " (control, scan, pose, gps or landmark)");
       }
       e.time = number(1, "time");
       if (e.time < last_time_) {
-        fail("time goes backwards: " + std::string(tokens_[1]) + " after " + format(last_time_));
+        fail("time goes backwards: " + clipped(tokens_[1]) + " after " + format(last_time_));
       }
       last_time_ = e.time;
       return true;
@@ -125,11 +149,11 @@ class LogReader::Parser {
     if (tokens_[0] != kMagic) fail("not a fastslam log: expected 'fastslam-log 1' first");
     fields(2, "fastslam-log VERSION");
     if (integer(1, "version") != static_cast<std::uint64_t>(kLogFormatVersion)) {
-      fail("unsupported version " + std::string(tokens_[1]) + " (this reader reads 1)");
+      fail("unsupported version " + clipped(tokens_[1]) + " (this reader reads 1)");
     }
     bool motion = false, noise = false, sensor = false, start = false;
     auto once = [&](bool& seen) {
-      if (seen) fail("header line '" + std::string(tokens_[0]) + "' is repeated");
+      if (seen) fail("header line " + quoted(tokens_[0]) + " is repeated");
       seen = true;
     };
     for (;;) {
@@ -167,8 +191,8 @@ class LogReader::Parser {
         h.start_time = number(1, "time");
         for (int k = 0; k < 3; ++k) h.start_pose[k] = number(2 + k, "pose");
       } else {
-        fail("unknown header line '" + std::string(key) +
-             "' (motion, control_noise, sensor, start or end_header)");
+        fail("unknown header line " + quoted(key) +
+             " (motion, control_noise, sensor, start or end_header)");
       }
     }
     if (!motion) fail("header has no 'motion' line");
@@ -204,19 +228,44 @@ class LogReader::Parser {
 
   // Next line with content (blank lines and '#' comments skipped) into tokens_.
   bool next_line() {
-    while (std::getline(in_, text_)) {
-      ++line_;
+    while (read_line()) {
       tokenize(text_, tokens_);
       if (!tokens_.empty() && tokens_[0].front() != '#') return true;
     }
     return false;
   }
 
+  // One line into text_, without its '\n'; false at the end of the input with nothing read.
+  // A line is at most kMaxLogLineBytes, so input without newlines (a binary file, /dev/zero)
+  // fails there instead of being read whole.
+  bool read_line() {
+    text_.clear();
+    std::streambuf* const buffer = in_.rdbuf();
+    if (buffer == nullptr) return false;
+    ++line_;
+    bool any = false;
+    for (;;) {
+      const int c = buffer->sbumpc();
+      if (c == std::char_traits<char>::eof()) {
+        in_.setstate(std::ios::eofbit);
+        if (!any) --line_;
+        return any;
+      }
+      any = true;
+      if (c == '\n') return true;
+      if (text_.size() == kMaxLogLineBytes) {
+        fail("line longer than " + std::to_string(kMaxLogLineBytes) +
+             " bytes (the format's limit, docs/log-format.md): not a fastslam log, or a scan "
+             "of more than " + std::to_string(kMaxScanObservations) + " observations");
+      }
+      text_.push_back(static_cast<char>(c));
+    }
+  }
+
   void fields(std::size_t n, const char* form) {
     if (tokens_.size() != n) {
-      std::string what = "'";
-      what += tokens_[0];
-      what += "' needs " + std::to_string(n) + " fields (";
+      std::string what = quoted(tokens_[0]);
+      what += " needs " + std::to_string(n) + " fields (";
       what += form;
       what += "), found " + std::to_string(tokens_.size());
       fail(what);
@@ -228,19 +277,19 @@ class LogReader::Parser {
     double value = 0.0;
     const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
     if (ec != std::errc() || end != f.data() + f.size()) {
-      fail(std::string(what) + ": '" + std::string(f) + "' is not a number");
+      fail(std::string(what) + ": " + quoted(f) + " is not a number");
     }
-    if (!std::isfinite(value)) fail(std::string(what) + ": '" + std::string(f) + "' is not finite");
+    if (!std::isfinite(value)) fail(std::string(what) + ": " + quoted(f) + " is not finite");
     return value;
   }
   double positive(std::size_t i, const char* what) {
     const double v = number(i, what);
-    if (!(v > 0)) fail(std::string(what) + " must be > 0 (got " + std::string(tokens_[i]) + ")");
+    if (!(v > 0)) fail(std::string(what) + " must be > 0 (got " + clipped(tokens_[i]) + ")");
     return v;
   }
   double non_negative(std::size_t i, const char* what) {
     const double v = number(i, what);
-    if (v < 0) fail(std::string(what) + " must be >= 0 (got " + std::string(tokens_[i]) + ")");
+    if (v < 0) fail(std::string(what) + " must be >= 0 (got " + clipped(tokens_[i]) + ")");
     return v;
   }
   std::uint64_t integer(std::size_t i, const char* what) {
@@ -249,7 +298,7 @@ class LogReader::Parser {
     const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
     if (ec != std::errc() || end != f.data() + f.size() ||
         value > static_cast<std::uint64_t>(INT64_MAX)) {
-      fail(std::string(what) + ": '" + std::string(f) + "' is not a non-negative integer");
+      fail(std::string(what) + ": " + quoted(f) + " is not a non-negative integer");
     }
     return value;
   }

@@ -5,8 +5,9 @@
 //
 // Reading is strict: every refusal (unknown record, wrong field count, a field that is not a
 // number, NaN or infinity, a negative range or dt, time going backwards, a missing or repeated
-// header line, a repeated landmark id) throws std::runtime_error "<file>:<line>: <reason>" and
-// returns nothing partial. Writing prints every double in its shortest exact form
+// header line, a repeated landmark id, a line or a scan over the limits below) throws
+// std::runtime_error "<file>:<line>: <reason>", quoting at most kMaxQuotedBytes of a bad
+// token, and returns nothing partial. Writing prints every double in its shortest exact form
 // (std::to_chars), so write -> read gives back bit-identical doubles.
 //
 // Ownership: `Log` is a plain value; `LogWriter` borrows its stream, which must outlive it.
@@ -14,6 +15,7 @@
 // event (about 80 bytes each) and every observation (24 bytes each).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
@@ -27,6 +29,13 @@
 namespace fastslam::tools {
 
 inline constexpr int kLogFormatVersion = 1;
+// Limits a reader holds any input to, so input that is not a log (no newline, /dev/zero) fails
+// early instead of filling memory: bytes in one line (4 MiB), observations in one scan (a
+// scan's line at about 60 bytes per observation fits), and bytes of a bad token quoted in a
+// message.
+inline constexpr std::size_t kMaxLogLineBytes = std::size_t{4} << 20;
+inline constexpr std::uint64_t kMaxScanObservations = 65'536;
+inline constexpr std::size_t kMaxQuotedBytes = 80;
 
 struct LogHeader {
   // Kind, its parameters (wheelbase, geometry) and the control noise.

@@ -4,6 +4,8 @@
 #include <fstream>
 #include <numbers>
 #include <string>
+#include <utility>
+#include <vector>
 #include <unistd.h>
 
 #include <gtest/gtest.h>
@@ -142,6 +144,45 @@ TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
   EXPECT_NE(e.find(": expected one JSON object"), std::string::npos) << e;
   e = error_of(R"({"particles": 10,)");
   EXPECT_NE(e.find(": not valid JSON"), std::string::npos) << e;
+}
+
+// CLI11 alone clamps 2^64 to 2^64 - 1 and wraps -1 round to it for unsigned options.
+TEST_F(CommandLine, IntegersOutOfRangeAreRefusedNotClampedOrWrapped) {
+  EXPECT_EQ(run("{}", "--seed 18446744073709551615").filter.seed, 18446744073709551615ULL);
+  for (const auto& [args, expected] : std::vector<std::pair<std::string, std::string>>{
+           {"--seed 18446744073709551616",
+            "--seed: '18446744073709551616' is out of range (0 to 18446744073709551615)"},
+           {"--seed -1", "--seed: '-1' is out of range (0 to 18446744073709551615)"},
+           {"--seed 0x10", "--seed: '0x10' is not a decimal integer"},
+           {"--seed 1e3", "--seed: '1e3' is not a decimal integer"},
+           {"--particles 4294967296", "--particles: '4294967296' is out of range"},
+           {"--threads -2", "--threads: '-2' is out of range"},
+           {"--max-steps 99999999999999999999", "is out of range"},
+           {"--loops 2147483648", "--loops: '2147483648' is out of range"},
+           {"--seed " + std::string(200, '9'), "'" + std::string(80, '9') + "... (200 bytes)'"},
+       }) {
+    const std::string e = error_of("{}", args);
+    EXPECT_NE(e.find(expected), std::string::npos) << args << ": " << e;
+    EXPECT_LT(e.size(), 200U) << e;
+  }
+  const std::string e = error_of(R"({"seed": -1})");
+  EXPECT_NE(e.find("key 'seed': --seed: '-1' is out of range"), std::string::npos) << e;
+}
+
+TEST_F(CommandLine, RepeatedConfigKeysEmptyOutAndTooManyThreadsAreRefused) {
+  std::string e = error_of(R"({"seed": 1, "particles": 5, "seed": 2})");
+  EXPECT_NE(e.find(path_ + ": key 'seed' is repeated: give each option once"), std::string::npos)
+      << e;
+  e = error_of(R"({"out": ""})");  // the command line's --out "" is the CLI test's
+  EXPECT_NE(e.find("--out \"\" names no path"), std::string::npos) << e;
+  const unsigned limit = max_startable_threads();
+  EXPECT_GE(limit, 1U);
+  EXPECT_EQ(run("{}", "--threads " + std::to_string(limit)).filter.threads, limit);
+  e = error_of("{}", "--threads " + std::to_string(limit + 1));
+  EXPECT_NE(e.find("--threads " + std::to_string(limit + 1) +
+                   ": more than this process can usefully start (" + std::to_string(limit)),
+            std::string::npos)
+      << e;
 }
 
 // The Python module's keyword arguments: a JSON object in memory, read as a config file is.

@@ -786,7 +786,7 @@ TEST(RunCommand, MixedAssociationDiscardsUnlabelledDetections) {
   from_log.association = "known";
   const std::string error = error_of(from_log);
   EXPECT_NE(error.find(log_path + ":"), std::string::npos) << error;
-  EXPECT_NE(error.find("(scan at t = "), std::string::npos) << error;
+  EXPECT_NE(error.find(" (scan 1, t = "), std::string::npos) << error;
   EXPECT_NE(error.find("has no landmark id ('-')"), std::string::npos) << error;
   EXPECT_NE(error.find("--association auto or ml"), std::string::npos) << error;
 
@@ -829,7 +829,7 @@ TEST(RunCommand, FilterErrorsNameTheRecord) {
   o.association = "known";
   const std::string error = error_of(o);
   EXPECT_NE(error.find(o.data + ":"), std::string::npos) << error;
-  EXPECT_NE(error.find("(t = 0.100 s)"), std::string::npos) << error;
+  EXPECT_NE(error.find(o.data + ":11 (scan 1, t = 0.100 s): "), std::string::npos) << error;
   EXPECT_NE(error.find("appears twice"), std::string::npos) << error;
   std::filesystem::remove(o.data);
 }

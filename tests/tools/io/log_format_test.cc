@@ -254,6 +254,65 @@ TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
   }
 }
 
+// Input that is not a log is refused within one line's limit, not read whole: a stream of NUL
+// bytes that never ends (--data /dev/zero) stops after about kMaxLogLineBytes.
+TEST(LogFormat, InputWithoutNewlinesFailsAtTheLineLimit) {
+  class Zeros : public std::streambuf {
+   public:
+    std::size_t served = 0;
+
+   protected:
+    int_type underflow() override {
+      served += sizeof(chunk_);
+      setg(chunk_, chunk_, chunk_ + sizeof(chunk_));
+      return traits_type::to_int_type(chunk_[0]);
+    }
+
+   private:
+    char chunk_[4096] = {};
+  };
+  Zeros zeros;
+  std::istream in(&zeros);
+  const std::string expected = "zeros:1: line longer than " + std::to_string(kMaxLogLineBytes) +
+                               " bytes (the format's limit, docs/log-format.md)";
+  try {
+    read_log(in, "zeros");
+    FAIL() << "no error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(expected, 0), 0U) << e.what();
+  }
+  EXPECT_LE(zeros.served, kMaxLogLineBytes + 8192);
+}
+
+TEST(LogFormat, LinesUpToTheLimitAreReadAndLongerOnesNamed) {
+  const std::string h = kHeader;
+  // A comment of exactly the limit is a line like any other.
+  std::string text = h + "#" + std::string(kMaxLogLineBytes - 1, 'c') + "\ncontrol 1 0.1 0 0\n";
+  std::istringstream fits(text);
+  EXPECT_EQ(read_log(fits, "x.log").events.size(), 1U);
+  text = h + "control 1 0.1 0 0\n#" + std::string(kMaxLogLineBytes, 'c') + "\n";
+  EXPECT_NE(error_of(text).find("x.log:8: line longer than"), std::string::npos)
+      << error_of(text).substr(0, 200);
+}
+
+TEST(LogFormat, ScansOverTheLimitAndLongTokensAreRefusedBriefly) {
+  const std::string h = kHeader;
+  const std::string over = std::to_string(kMaxScanObservations + 1);
+  EXPECT_NE(error_of(h + "scan 1 " + over + " 5 0.1 -\n")
+                .find("x.log:7: scan of " + over + " observations: more than the format's "
+                      "limit of " + std::to_string(kMaxScanObservations)),
+            std::string::npos);
+  // A bad token of 200000 bytes is quoted by its first kMaxQuotedBytes and its length.
+  const std::string junk(200'000, '7');
+  for (const std::string& text : {h + "scan 1 1 5 " + junk + "x -\n", h + junk + "x 1 2\n"}) {
+    const std::string e = error_of(text);
+    EXPECT_LT(e.size(), 300U) << e.substr(0, 400);
+    EXPECT_NE(e.find("'" + std::string(kMaxQuotedBytes, '7') + "...' (200001 bytes)"),
+              std::string::npos)
+        << e.substr(0, 400);
+  }
+}
+
 // The reader gives read_log's events one at a time, landmarks as they come, the line of each
 // event; a malformed record fails where it is, after the events before it were given.
 TEST(LogReader, StreamsWhatReadLogReadsAndFailsAtTheBadRecord) {
