@@ -84,6 +84,7 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"gate", config.gating.gate},
       {"no-negative-information", !config.existence.negative_information},
       {"existence-missed", config.existence.missed},
+      {"existence-confirm-at", config.existence.confirm_at},
       {"existence-range-margin", config.existence.range_margin},
       {"ekf-gate-accept", config.ekf.gate_accept},
       {"ekf-gate-new", config.ekf.gate_new},

@@ -66,6 +66,9 @@ def test_module_matches_command_line(cli, loop_log, tmp_path, case):
     # fastslam.run is the command line's run: the same metrics.json, timings aside.
     metrics = fastslam.run(loop_log, **options)
     written = json.loads((tmp_path / "metrics.json").read_text())
+    # The options differ only in where the command line was told to write.
+    assert written["options"].pop("out") == str(tmp_path)
+    assert metrics["options"].pop("out") is None
     assert without_timings(metrics) == without_timings(written)
 
 
