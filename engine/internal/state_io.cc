@@ -172,8 +172,8 @@ KnownSlots get_known(std::istream& in, bool known_ids, std::vector<std::int64_t>
   return table;
 }
 
-// Finite poses; log-weights below +inf, at least one above -inf (the estimate and resampling
-// normalise by the largest).
+// Finite poses; log-weights at most 0 (every scan normalises them, l_i -= log sum exp l), at
+// least one above -inf (the estimate and resampling normalise by the largest).
 void get_columns(std::istream& in, memory::ParticleStore& store) {
   for (std::span<double> column :
        {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
@@ -184,7 +184,7 @@ void get_columns(std::istream& in, memory::ParticleStore& store) {
     if (!std::isfinite(store.x()[i]) || !std::isfinite(store.y()[i]) ||
         !std::isfinite(store.theta()[i]) || !std::isfinite(store.v()[i]) ||
         !std::isfinite(store.omega()[i]) || std::isnan(store.log_weight()[i]) ||
-        store.log_weight()[i] == std::numeric_limits<double>::infinity()) {
+        store.log_weight()[i] > 0.0) {
       corrupt("particle " + std::to_string(i));
     }
     possible = possible || std::isfinite(store.log_weight()[i]);

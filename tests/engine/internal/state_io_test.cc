@@ -180,6 +180,7 @@ TEST(StateIoTest, FieldsBreakingTheEnginesInvariantsAreRefusedByName) {
                                      s.store.log_weight()[2] = s.store.log_weight()[3] =
                                          -std::numeric_limits<double>::infinity(); },
             "weight is zero");
+    changed([](FilterState& s) { s.store.log_weight()[2] = 0.5; }, "particle 2");
     const auto edit = [](FilterState& s, memory::Slot slot, auto&& change) {
       // Not indexed with known ids; indexed otherwise (only the mean moves the entry).
       s.store.map(0).update(slot, change, largest_variance);
