@@ -13,6 +13,11 @@ void throw_empty_slot(Slot slot, std::size_t capacity, const char* operation) {
   throw std::out_of_range(what);
 }
 
+void throw_held_slot(Slot slot, const char* operation) {
+  throw std::invalid_argument("LandmarkTree::" + std::string(operation) + ": slot " +
+                              std::to_string(slot) + " holds a landmark already");
+}
+
 }  // namespace internal
 
 template class BasicLandmarkTree<DefaultTreePolicy>;

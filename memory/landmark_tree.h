@@ -6,9 +6,9 @@
 // Ownership: borrows its NodeHeap, which must outlive the tree and every copy of it.
 // Thread safety: thread-compatible; handles sharing nodes may be used from any threads at once
 // (atomic counts, shared nodes never written).
-// Costs (N landmarks, h = O(log N)): copy, move, size O(1); find, at O(h); edit, set O(h) with
-// up to h + 1 allocations; insert, erase O(h 2^kInnerBits); freeing is iterative and frees
-// exactly the nodes no other map holds.
+// Costs (N landmarks, h = O(log N)): copy, move, size O(1); find, at O(h); edit, set, insert_at
+// O(h) with up to h + 1 allocations (insert_at: h of the slot's tree); insert, erase
+// O(h 2^kInnerBits); freeing is iterative and frees exactly the nodes no other map holds.
 #pragma once
 
 #include <array>
@@ -95,6 +95,11 @@ class BasicLandmarkTree {
   // Stores `landmark` in the lowest free slot and returns it. Throws std::bad_alloc or
   // std::length_error (2^32 slots) and then leaves the map's contents unchanged.
   Slot insert(const Landmark& landmark);
+
+  // Stores `landmark` in the empty `slot`, growing the tree to cover it (a loader rebuilding a
+  // map with holes, without filling and erasing them). Throws std::invalid_argument naming the
+  // slot when it holds a landmark, or std::bad_alloc; either way the contents are unchanged.
+  void insert_at(Slot slot, const Landmark& landmark);
 
   // Removes the landmark in `slot`. Throws std::out_of_range when the slot holds none (for
   // example, erased already) and changes nothing.

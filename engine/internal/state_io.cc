@@ -151,61 +151,94 @@ FilterConfig get_config(std::istream& in) {
   return config;
 }
 
-// Known association: the table maps distinct ids >= 0 onto the slots 0..K-1.
-KnownSlots get_known(std::istream& in, std::size_t& entries) {
+// Known association: the table maps distinct ids >= 0 (saved in increasing order) onto the
+// slots 0..K-1; `ids` gets each slot's id. Unknown association: the table is empty.
+KnownSlots get_known(std::istream& in, bool known_ids, std::vector<std::int64_t>& ids) {
   const std::vector<KnownSlot> known = get_vector<KnownSlot>(in, kLimit);
-  std::vector<bool> slot_used(known.size(), false);
-  for (const KnownSlot& k : known) {
-    if (k.id < 0 || k.slot >= known.size() || slot_used[k.slot] || k.zero != 0) {
-      corrupt("known-id table");
+  if (!known_ids && !known.empty()) corrupt("known-id table without known association");
+  ids.assign(known.size(), -1);
+  for (std::size_t j = 0; j < known.size(); ++j) {
+    const KnownSlot& k = known[j];
+    if (k.id < 0 || (j > 0 && k.id <= known[j - 1].id)) {
+      corrupt("known-id table: ids negative, repeated or out of order");
     }
-    slot_used[k.slot] = true;
+    if (k.slot >= known.size() || ids[k.slot] != -1 || k.zero != 0) {
+      corrupt("known-id table: slot " + std::to_string(k.slot) + " out of range or repeated");
+    }
+    ids[k.slot] = k.id;
   }
-  entries = known.size();
   KnownSlots table;
   for (const KnownSlot& k : known) table.emplace(k.id, k.slot);
   return table;
 }
 
+// Finite poses; log-weights at most 0 (every scan normalises them, l_i -= log sum exp l), at
+// least one above -inf (the estimate and resampling normalise by the largest).
 void get_columns(std::istream& in, memory::ParticleStore& store) {
   for (std::span<double> column :
        {store.x(), store.y(), store.theta(), store.v(), store.omega(), store.log_weight()}) {
     read_bytes(in, column.data(), column.size() * sizeof(double));
   }
+  bool possible = false;
   for (std::size_t i = 0; i < store.size(); ++i) {
     if (!std::isfinite(store.x()[i]) || !std::isfinite(store.y()[i]) ||
         !std::isfinite(store.theta()[i]) || !std::isfinite(store.v()[i]) ||
         !std::isfinite(store.omega()[i]) || std::isnan(store.log_weight()[i]) ||
-        store.log_weight()[i] == std::numeric_limits<double>::infinity()) {
+        store.log_weight()[i] > 0.0) {
       corrupt("particle " + std::to_string(i));
     }
+    possible = possible || std::isfinite(store.log_weight()[i]);
+  }
+  if (!possible) corrupt("every particle's weight is zero");
+}
+
+// A landmark as the engine keeps one: set_map's rules (a finite position within 1e150, a
+// symmetric positive definite covariance, which the updates invert; finite log-odds), last seen
+// at a step already taken, and with known ids the id the table gives its slot.
+void check_landmark(const memory::Landmark& lm, memory::Slot slot, std::size_t particle,
+                    std::uint64_t step, const std::vector<std::int64_t>& known_ids) {
+  auto where = [&] {
+    return "landmark in slot " + std::to_string(slot) + " of particle " +
+           std::to_string(particle) + ": ";
+  };
+  if (!std::isfinite(lm.x) || !std::isfinite(lm.y) || std::abs(lm.x) > 1e150 ||
+      std::abs(lm.y) > 1e150) {
+    corrupt(where() + "position");
+  }
+  const double det = lm.sxx * lm.syy - lm.sxy * lm.sxy;
+  if (!std::isfinite(lm.sxx) || !std::isfinite(lm.sxy) || !std::isfinite(lm.syy) ||
+      !(lm.sxx > 0) || !(det > 0) || !std::isfinite(det)) {
+    corrupt(where() + "covariance not positive definite");
+  }
+  if (!std::isfinite(lm.log_odds)) corrupt(where() + "log-odds");
+  if (lm.last_seen < 0 || static_cast<std::uint64_t>(lm.last_seen) > step) {
+    corrupt(where() + "last seen after the current step");
+  }
+  if (!known_ids.empty() && lm.id != static_cast<std::uint64_t>(known_ids[slot])) {
+    corrupt(where() + "id differs from the known-id table's");
   }
 }
 
-// Rebuilds one map with the same slots: inserting in slot order takes the lowest free slot, so
-// placeholders fill the holes and are erased afterwards. Known association: every map holds
-// exactly the K known slots. Unknown: any count, and holes (removed landmarks) of at most
-// kMaxHoles in all, so a corrupt slot cannot make the load allocate without bound.
-void get_map(std::istream& in, bool known_ids, std::size_t known_count, memory::LandmarkTree& map) {
+// Rebuilds one map with the same slots, each landmark stored in its own slot (insert_at), so a
+// hole costs nothing: work and memory are O(h) per landmark read, whatever the slots' values.
+// Slots strictly increase; with known association every map holds exactly the K known slots.
+void get_map(std::istream& in, bool known_association, const std::vector<std::int64_t>& known_ids,
+             std::size_t particle, std::uint64_t step, memory::LandmarkTree& map) {
   const auto count = get<std::uint64_t>(in);
-  if (known_ids ? count != known_count : count > kLimit) corrupt("map size");
-  constexpr std::uint64_t kMaxHoles = std::uint64_t{1} << 24;
-  std::vector<memory::Slot> holes;
+  if (known_association ? count != known_ids.size() : count > kLimit) {
+    corrupt("map size of particle " + std::to_string(particle));
+  }
+  memory::Slot previous = 0;
   for (std::uint64_t k = 0; k < count; ++k) {
     const auto slot = get<memory::Slot>(in);
     const auto lm = get<memory::Landmark>(in);
-    if ((known_ids && slot >= known_count) || slot < map.size() ||
-        slot - map.size() > kMaxHoles - holes.size()) {
-      corrupt("slots out of order");
+    if ((known_association && slot >= known_ids.size()) || (k > 0 && slot <= previous)) {
+      corrupt("slots of particle " + std::to_string(particle) + " out of order or range");
     }
-    if (!std::isfinite(lm.x) || !std::isfinite(lm.y) || std::abs(lm.x) > 1e150 ||
-        std::abs(lm.y) > 1e150) {
-      corrupt("landmark position");
-    }
-    while (map.size() < slot) holes.push_back(map.insert({}));
-    map.insert(lm);
+    previous = slot;
+    check_landmark(lm, slot, particle, step, known_ids);
+    map.insert_at(slot, lm);
   }
-  for (memory::Slot hole : holes) map.erase(hole);
 }
 
 }  // namespace
@@ -274,8 +307,15 @@ StateHeader read_header(std::istream& in) {
        {&c.step, &c.controls, &c.scans, &c.observations, &c.resamples, &c.weight_resets}) {
     *v = get<std::uint64_t>(in);
   }
-  // The random streams are keyed by step < 2^56 (parallel/random_stream.h).
+  // The random streams are keyed by step < 2^56 (parallel/random_stream.h); every step is a
+  // control or a scan, and a scan resamples or resets the weights at most once.
   if (c.step >= std::uint64_t{1} << 56) corrupt("step counter");
+  if (c.controls > c.step || c.scans != c.step - c.controls) {
+    corrupt("counters: controls and scans do not add up to the steps");
+  }
+  if (c.resamples > c.scans || c.weight_resets > c.scans) {
+    corrupt("counters: more resamples or weight resets than scans");
+  }
   h.variance_bound = get<double>(in);
   if (!std::isfinite(h.variance_bound) || h.variance_bound < 0) corrupt("variance bound");
   h.time = get<double>(in);
@@ -283,18 +323,38 @@ StateHeader read_header(std::istream& in) {
   if (!std::isfinite(h.time) || timed > 1) corrupt("clock");
   h.timed = timed == 1;
   h.associations = get_report(in);
+  if (h.associations.size() > c.observations || (c.scans == 0 && !h.associations.empty())) {
+    corrupt("scan report longer than the observations seen");
+  }
   h.pending = get_vector<PendingControl>(in, kLimit);
-  for (const PendingControl& p : h.pending) {
+  if (h.pending.size() > c.controls) corrupt("more queued controls than controls");
+  for (std::size_t k = 0; k < h.pending.size(); ++k) {
+    const PendingControl& p = h.pending[k];
     if (!std::isfinite(p.u0) || !std::isfinite(p.u1) || !std::isfinite(p.dt) || p.dt < 0 ||
-        p.step >= c.step) {
-      corrupt("queued control");
+        p.step >= c.step || (k > 0 && p.step <= h.pending[k - 1].step)) {
+      corrupt("queued control " + std::to_string(k));
     }
   }
   h.trajectory = get_vector<TrajectoryPoint>(in, kLimit);
-  h.known = get_known(in, h.known_entries);
+  if (!h.config.record_trajectory && !h.trajectory.empty()) {
+    corrupt("trajectory recorded without record_trajectory");
+  }
+  for (std::size_t k = 0; k < h.trajectory.size(); ++k) {
+    const TrajectoryPoint& p = h.trajectory[k];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.theta) ||
+        p.control >= c.controls || (k > 0 && p.control <= h.trajectory[k - 1].control)) {
+      corrupt("trajectory point " + std::to_string(k));
+    }
+  }
+  h.known = get_known(in, h.config.association == Association::kKnown, h.known_ids);
   const std::uint64_t cov_size = std::uint64_t{h.config.particles} * PoseCovariances::kSlot;
   h.covariances = get_vector<double>(in, cov_size);
   if (h.covariances.size() != cov_size) corrupt("covariance block size");
+  // FastSLAM 1.0 keeps none and saves zeros.
+  const bool kept = h.config.algorithm == Algorithm::kFastSlam2;
+  for (double v : h.covariances) {
+    if (!std::isfinite(v) || (!kept && v != 0.0)) corrupt("pose covariance");
+  }
   return h;
 }
 
@@ -319,7 +379,7 @@ void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
       continue;
     }
     memory::LandmarkTree map(s.heap);
-    get_map(in, known_ids, h.known_entries, map);
+    get_map(in, known_ids, h.known_ids, i, s.counters.step, map);
     store.map(i) = memory::ParticleMap(std::move(map), store.options().indexing, largest_variance);
   }
 }

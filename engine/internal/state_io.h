@@ -6,12 +6,16 @@
 // value). Spatial indices are not
 // written: they are rebuilt from the maps (an index's entries are its map's slots and means, and
 // queries are exact, so the rebuilt index answers the same). Equal states save equal bytes.
-// Loading trusts nothing: every length is checked against what the configuration implies and
-// vectors are read in bounded chunks, so a corrupt length fails with std::runtime_error once the
-// stream runs out instead of allocating what it claims; the particles are allocated only after
-// the covariances (25 doubles per particle) were read.
+// Loading trusts nothing: every field is checked against the invariants the engine relies on
+// (counters that add up, steps already taken, finite numbers, positive definite landmark
+// covariances, distinct known ids that match every map, slots in increasing order) and refused
+// with std::runtime_error naming the field. Work and memory are bounded by the input's size:
+// vectors are read in bounded chunks, so a corrupt length fails once the stream runs out instead
+// of allocating what it claims; the particles are allocated only after the covariances (25
+// doubles per particle) were read; a landmark is stored in its slot directly, so a slot far
+// beyond the others costs a tree path (O(log N) nodes), not the holes below it.
 // Thread safety: thread-compatible. Costs: O(M N) worst case (maps that share a root are written
-// once); load allocates as the stream delivers.
+// once); load allocates as the stream delivers, at most a small multiple of the bytes read.
 #pragma once
 
 #include <iosfwd>
@@ -33,7 +37,7 @@ struct StateHeader {
   std::vector<PendingControl> pending;
   std::vector<TrajectoryPoint> trajectory;
   KnownSlots known;
-  std::size_t known_entries = 0;  // the table's saved length (each map holds that many)
+  std::vector<std::int64_t> known_ids;  // each slot's id; every map holds these slots
   std::vector<double> covariances;
 };
 

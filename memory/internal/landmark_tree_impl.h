@@ -12,6 +12,7 @@ namespace fastslam::memory {
 
 namespace internal {
 [[noreturn]] void throw_empty_slot(Slot slot, std::size_t capacity, const char* operation);
+[[noreturn]] void throw_held_slot(Slot slot, const char* operation);
 }  // namespace internal
 
 template <class P>
@@ -259,6 +260,40 @@ Slot BasicLandmarkTree<P>::insert(const Landmark& landmark) {
   }
   ++size_;
   return static_cast<Slot>(slot);
+}
+
+template <class P>
+void BasicLandmarkTree<P>::insert_at(Slot slot, const Landmark& landmark) {
+  if (find(slot) != nullptr) {
+    internal::throw_held_slot(slot, "insert_at");
+  }
+  if (root_ == nullptr) {
+    height_ = 0;  // own_path creates the nodes of the path only
+    while (capacity_at(height_) <= slot) ++height_;
+  }
+  std::array<Inner*, kMaxHeight> path;
+  Leaf* leaf;
+  try {
+    // New roots above the old one, whose first child it becomes, until `slot` is covered.
+    while (capacity_at(height_) <= slot) {
+      Inner* top = make<Inner>();
+      top->child[0] = root_;
+      top->aux = size_;
+      root_ = top;
+      ++height_;
+    }
+    leaf = own_path(slot, path);
+  } catch (...) {
+    prune(slot);  // frees the empty path and collapses the new roots
+    throw;
+  }
+  const unsigned i = slot & (kLeafWidth - 1);
+  leaf->landmarks[i] = landmark;
+  leaf->aux |= 1u << i;
+  for (unsigned k = 0; k < height_; ++k) {
+    ++path[k]->aux;
+  }
+  ++size_;
 }
 
 template <class P>

@@ -602,6 +602,108 @@ TYPED_TEST(LandmarkTreeTest, StrongGuaranteeOnContentsWhenAllocationFails) {
   EXPECT_GT(failures, 50);
 }
 
+// insert_at, the loader's way to rebuild a map with holes: slots in any order, as far apart as
+// 32 bits allow, give the oracle's contents on the minimal tree holding exactly their paths'
+// nodes; insert then still takes the lowest free slot; a held slot is refused, naming it, and
+// changes nothing.
+TYPED_TEST(LandmarkTreeTest, InsertAtBuildsExactlyThePathsOfItsSlots) {
+  using Tree = typename TestFixture::TreeType;
+  std::mt19937_64 rng(21);
+  for (int round = 0; round < 24; ++round) {
+    Tree tree(this->heap_);
+    Oracle oracle;
+    std::vector<Slot> slots;
+    for (int k = 0; k < 1 + 3 * round; ++k) {
+      // same_contents probes every free slot below the last: at most 2^16 of them.
+      const Slot s = static_cast<Slot>(rng() % (std::uint64_t{16} << (round % 13)));
+      if (oracle.count(s) != 0) continue;
+      const Landmark l = tagged_landmark(3, s);
+      tree.insert_at(s, l);
+      oracle[s] = l;
+      slots.push_back(s);
+      ASSERT_EQ(tree.size(), oracle.size());
+      ASSERT_EQ(tree.height(), minimal_height<Tree>(std::uint64_t{oracle.rbegin()->first} + 1))
+          << "after slot " << s;
+      ASSERT_EQ(this->live(), path_union<Tree>(slots, tree.height()).nodes) << "after slot " << s;
+    }
+    ASSERT_TRUE(same_contents(tree, oracle));
+
+    Tree shared = tree;
+    const std::int64_t allocations = this->allocations();
+    try {
+      shared.insert_at(slots.back(), tagged_landmark(4, 0));
+      ADD_FAILURE() << "insert_at(" << slots.back() << ") on a held slot did not throw";
+    } catch (const std::invalid_argument& error) {
+      EXPECT_NE(std::string(error.what()).find("slot " + std::to_string(slots.back())),
+                std::string::npos)
+          << error.what();
+    }
+    EXPECT_EQ(this->allocations(), allocations);
+    EXPECT_TRUE(shared.shares_root_with(tree));
+
+    const Landmark fresh = tagged_landmark(5, 0);
+    const Slot expected = lowest_free(oracle);
+    ASSERT_EQ(tree.insert(fresh), expected);
+    oracle[expected] = fresh;
+    ASSERT_TRUE(same_contents(tree, oracle));
+    ASSERT_EQ(shared.size() + 1, tree.size());
+  }
+  // The last slot: the tallest tree, two paths, iterated in slot order.
+  Tree far(this->heap_);
+  for (Slot s : {0xFFFF'FFFFu, 3u}) far.insert_at(s, tagged_landmark(6, s));
+  EXPECT_EQ(far.height(), minimal_height<Tree>(std::uint64_t{1} << 32));
+  EXPECT_EQ(this->live(), path_union<Tree>({3u, 0xFFFF'FFFFu}, far.height()).nodes);
+  EXPECT_EQ(far.at(0xFFFF'FFFFu), tagged_landmark(6, 0xFFFF'FFFFu));
+  EXPECT_EQ(far.find(0xFFFF'FFFEu), nullptr);
+  std::vector<Slot> order;
+  for (const auto entry : far) order.push_back(entry.slot);
+  EXPECT_EQ(order, (std::vector<Slot>{3u, 0xFFFF'FFFFu}));
+}
+
+// insert_at under failing allocations, on a tree held alone and on one shared: the contents
+// and the height are as before, nothing leaks, and the same call then succeeds.
+TYPED_TEST(LandmarkTreeTest, InsertAtKeepsTheContentsWhenAllocationFails) {
+  using Tree = typename TestFixture::TreeType;
+  FailingHeap failing(this->heap_);
+  int failures = 0;
+  for (bool shared : {false, true}) {
+    for (std::int64_t k = 1;; ++k) {
+      ASSERT_LT(k, 200) << "an insert_at that never stops allocating";
+      Tree tree(failing);
+      Oracle oracle;
+      for (Slot s : {Slot{5}, Slot{1000}}) {
+        tree.insert_at(s, tagged_landmark(1, s));
+        oracle[s] = tagged_landmark(1, s);
+      }
+      const unsigned height = tree.height();
+      const Tree base = shared ? tree : Tree(failing);
+      const Oracle base_oracle = shared ? oracle : Oracle{};
+      constexpr Slot kFar = 0x12345u;
+      failing.fail_at(k);
+      bool threw = false;
+      try {
+        tree.insert_at(kFar, tagged_landmark(2, kFar));
+      } catch (const std::bad_alloc&) {
+        threw = true;
+      }
+      failing.disarm();
+      if (threw) {
+        ++failures;
+        ASSERT_TRUE(same_contents(tree, oracle)) << "after bad_alloc at allocation " << k;
+        ASSERT_EQ(tree.height(), height) << "new roots left after bad_alloc at allocation " << k;
+        tree.insert_at(kFar, tagged_landmark(2, kFar));
+      }
+      oracle[kFar] = tagged_landmark(2, kFar);
+      ASSERT_TRUE(same_contents(tree, oracle));
+      ASSERT_TRUE(same_contents(base, base_oracle));
+      ASSERT_EQ(tree.height(), minimal_height<Tree>(std::uint64_t{kFar} + 1));
+      if (!threw) break;
+    }
+    ASSERT_EQ(failing.stats().live_nodes, 0);
+  }
+  EXPECT_GT(failures, 2);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Non-generic tests
 

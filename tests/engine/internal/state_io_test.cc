@@ -3,6 +3,9 @@
 // rebuilt from the map; corrupt and truncated streams fail with std::runtime_error.
 #include "engine/internal/state_io.h"
 
+#include <cstring>
+#include <limits>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -37,7 +40,8 @@ void fill(FilterState& s) {
       continue;
     }
     for (std::uint64_t k = 0; k < 6; ++k) {
-      const memory::Landmark l{static_cast<double>(k + i), 1.0, 0.1, 0.0, 0.2, 1.0, k, 2};
+      const std::uint64_t id = known ? 100 - k : k;  // known ids: the table's
+      const memory::Landmark l{static_cast<double>(k + i), 1.0, 0.1, 0.0, 0.2, 1.0, id, 2};
       s.store.map(i).insert(l, largest_variance(l));
     }
     if (!known) s.store.map(i).erase(2);  // a hole
@@ -61,6 +65,7 @@ TEST(StateIoTest, ReadStatesSaveTheSameBytes) {
     FilterConfig c;
     c.particles = 10;
     c.association = association;
+    c.record_trajectory = true;
     // FastSLAM 2.0 with known ids keeps covariances, which must survive the round trip too.
     if (association == Association::kKnown) c.algorithm = Algorithm::kFastSlam2;
     FilterState s(c);
@@ -122,9 +127,156 @@ TEST(StateIoTest, StepBeyondTheStreamsFails) {
   fill(s);
   std::vector<TrajectoryPoint> unused;
   s.counters.step = (std::uint64_t{1} << 56) - 1;
+  s.counters.controls = s.counters.step - s.counters.scans;
   EXPECT_NO_THROW(round_trip(save(s, {}), &unused));
   s.counters.step = std::uint64_t{1} << 56;
+  s.counters.controls = s.counters.step - s.counters.scans;
   EXPECT_THROW(round_trip(save(s, {}), &unused), std::runtime_error);
+}
+
+double kNaN() { return std::numeric_limits<double>::quiet_NaN(); }
+
+// A state the engine cannot reach, saved as is: the load refuses it, naming the field.
+void expect_refused(const FilterState& s, const std::vector<TrajectoryPoint>& trajectory,
+                    const std::string& needle) {
+  std::vector<TrajectoryPoint> unused;
+  try {
+    round_trip(save(s, trajectory), &unused);
+    ADD_FAILURE() << "loaded; expected a refusal naming '" << needle << "'";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
+TEST(StateIoTest, FieldsBreakingTheEnginesInvariantsAreRefusedByName) {
+  for (Association association : {Association::kKnown, Association::kMaximumLikelihood}) {
+    SCOPED_TRACE(association == Association::kKnown ? "known ids" : "unknown ids");
+    FilterConfig c;
+    c.particles = 4;
+    c.association = association;
+    const bool known = association == Association::kKnown;
+    auto fresh = [&] {
+      auto s = std::make_unique<FilterState>(c);
+      fill(*s);
+      return s;
+    };
+    std::vector<TrajectoryPoint> unused;
+    ASSERT_NO_THROW(round_trip(save(*fresh(), {}), &unused));
+    auto changed = [&](auto&& change, const std::string& needle,
+                       const std::vector<TrajectoryPoint>& trajectory = {}) {
+      SCOPED_TRACE(needle);
+      std::unique_ptr<FilterState> s = fresh();
+      change(*s);
+      expect_refused(*s, trajectory, needle);
+    };
+    changed([](FilterState& s) { ++s.counters.scans; }, "do not add up");
+    changed([](FilterState& s) { s.counters.resamples = s.counters.scans + 1; }, "resamples");
+    changed([](FilterState& s) { std::swap(s.pending[0], s.pending[1]); }, "queued control 1");
+    changed([](FilterState& s) { s.associations.push_back({0, AssociationOutcome::kNew, 1, 0}); },
+            "scan report longer");
+    changed([](FilterState&) {}, "trajectory recorded without record_trajectory",
+            {{0, 1.0, 2.0, 3.0}});
+    changed([](FilterState& s) { s.store.log_weight()[0] = s.store.log_weight()[1] =
+                                     s.store.log_weight()[2] = s.store.log_weight()[3] =
+                                         -std::numeric_limits<double>::infinity(); },
+            "weight is zero");
+    changed([](FilterState& s) { s.store.log_weight()[2] = 0.5; }, "particle 2");
+    const auto edit = [](FilterState& s, memory::Slot slot, auto&& change) {
+      // Not indexed with known ids; indexed otherwise (only the mean moves the entry).
+      s.store.map(0).update(slot, change, largest_variance);
+    };
+    changed([&](FilterState& s) { edit(s, 0, [](memory::Landmark& l) { l.sxy = 0.2; }); },
+            "landmark in slot 0 of particle 0: covariance not positive definite");
+    changed([&](FilterState& s) { edit(s, 1, [](memory::Landmark& l) { l.syy = kNaN(); }); },
+            "slot 1 of particle 0: covariance");
+    changed([&](FilterState& s) { edit(s, 0, [](memory::Landmark& l) { l.log_odds = kNaN(); }); },
+            "log-odds");
+    changed([&](FilterState& s) { edit(s, 0, [](memory::Landmark& l) { l.last_seen = 13; }); },
+            "last seen after the current step");
+    if (known) {  // (the spatial index refuses such a mean before the save could)
+      changed([&](FilterState& s) { edit(s, 0, [](memory::Landmark& l) { l.x = 1e200; }); },
+              "slot 0 of particle 0: position");
+      changed([&](FilterState& s) { edit(s, 3, [](memory::Landmark& l) { l.id = 5; }); },
+              "slot 3 of particle 0: id differs from the known-id table's");
+      // Two ids for one slot: the table's order and distinctness.
+      changed([](FilterState& s) { s.known_slots[42] = 0; }, "known-id table");
+    } else {
+      changed([](FilterState& s) { s.known_slots[7] = 0; },
+              "known-id table without known association");
+    }
+  }
+  // FastSLAM 2.0's pose covariances must be finite; FastSLAM 1.0 keeps none and saves zeros,
+  // so anything else in its block is corrupt.
+  FilterConfig fs2;
+  fs2.particles = 2;
+  fs2.algorithm = Algorithm::kFastSlam2;
+  FilterState s2(fs2);
+  fill(s2);
+  s2.covariances.at<3>(1)(2, 2) = kNaN();
+  expect_refused(s2, {}, "pose covariance");
+  FilterConfig fs1;
+  fs1.particles = 2;
+  FilterState s1(fs1);
+  fill(s1);
+  std::string bytes = save(s1, {});
+  // The block: its length (2 x 25) and 50 zeros, just before the six columns and the maps.
+  const std::uint64_t length = 50;
+  const std::size_t at = bytes.find(std::string(reinterpret_cast<const char*>(&length), 8) +
+                                    std::string(50 * 8, '\0'));
+  ASSERT_NE(at, std::string::npos);
+  bytes[at + 8 + 7] = 0x3f;  // 0x3f00...: a small positive double
+  std::vector<TrajectoryPoint> unused;
+  try {
+    round_trip(bytes, &unused);
+    ADD_FAILURE() << "a FastSLAM 1.0 state with a pose covariance loaded";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("pose covariance"), std::string::npos) << e.what();
+  }
+}
+
+// The fix for a slot far beyond the others: the old loader filled the holes below it with
+// placeholders (2^24 of them, 1.2 GB, for an 8 KB file). Now each landmark costs one tree path,
+// so a map whose last slot is 2^32 - 16 loads with a handful of nodes per landmark, and a slot
+// that repeats or goes back is refused.
+TEST(StateIoTest, SlotsFarApartCostAPathNotTheHolesBelow) {
+  FilterConfig c;
+  c.particles = 1;
+  c.association = Association::kMaximumLikelihood;
+  FilterState s(c);
+  fill(s);
+  const std::string good = save(s, {});
+  // The map is the stream's tail: 8 (count) + 5 x (4 slot + 64 landmark); the last slot:
+  const std::size_t last_slot_at = good.size() - 64 - 4;
+  std::string far = good;
+  const memory::Slot kFar = 0xFFFF'FFF0u;
+  std::memcpy(far.data() + last_slot_at, &kFar, sizeof(kFar));
+  std::istringstream in(far);
+  StateHeader header = read_header(in);
+  FilterState loaded(header.config);
+  read_particles(in, std::move(header), loaded);
+  ASSERT_EQ(loaded.store.map(0).size(), 5u);
+  EXPECT_NE(loaded.store.map(0).find(kFar), nullptr);
+  const std::int64_t per_landmark =
+      memory::LandmarkTree::kMaxHeight + 1 + 4;  // a path, and the index's share
+  EXPECT_LE(loaded.heap.stats().live_nodes, 5 * per_landmark);
+
+  for (const memory::Slot bad : {memory::Slot{0}, memory::Slot{4}}) {  // repeats / goes back
+    std::string b = good;
+    std::memcpy(b.data() + last_slot_at, &bad, sizeof(bad));
+    std::vector<TrajectoryPoint> unused;
+    EXPECT_THROW(
+        {
+          try {
+            round_trip(b, &unused);
+          } catch (const std::runtime_error& e) {
+            EXPECT_NE(std::string(e.what()).find("slots of particle 0 out of order"),
+                      std::string::npos)
+                << e.what();
+            throw;
+          }
+        },
+        std::runtime_error);
+  }
 }
 
 }  // namespace
