@@ -10,6 +10,9 @@
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <vector>
+
+#include <Eigen/Eigenvalues>
 
 #include "engine/internal/map_update.h"
 
@@ -241,6 +244,31 @@ void get_map(std::istream& in, bool known_association, const std::vector<std::in
   }
 }
 
+// FastSLAM 2.0's proposal factors each particle's pose covariance: its N x N block (N the
+// motion state's dimension) must be symmetric and positive semi-definite, the rest of the slot
+// zero. The eigenvalues may fall below zero by rounding only (relative to the largest).
+void check_pose_covariances(const MotionConfig& motion, const std::vector<double>& values) {
+  const int n = visit_motion(motion, [](const auto& model) {
+    return std::remove_cvref_t<decltype(model)>::kStateDim;
+  });
+  constexpr std::size_t kSlot = PoseCovariances::kSlot;
+  for (std::size_t i = 0; i * kSlot < values.size(); ++i) {
+    const double* p = &values[i * kSlot];
+    const std::string what = "pose covariance of particle " + std::to_string(i);
+    for (std::size_t k = static_cast<std::size_t>(n * n); k < kSlot; ++k) {
+      if (p[k] != 0.0) corrupt(what + ": entry " + std::to_string(k) + " outside the block");
+    }
+    const Eigen::Map<const Eigen::MatrixXd> c(p, n, n);
+    if (c != c.transpose()) corrupt(what + ": not symmetric");
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(c, Eigen::EigenvaluesOnly);
+    const Eigen::VectorXd& values_i = eigen.eigenvalues();
+    if (eigen.info() != Eigen::Success ||
+        values_i.minCoeff() < -1e-9 * std::max(1.0, values_i.maxCoeff())) {
+      corrupt(what + ": not positive semi-definite");
+    }
+  }
+}
+
 }  // namespace
 
 void save_state(const FilterState& s, const std::vector<TrajectoryPoint>& trajectory,
@@ -355,6 +383,7 @@ StateHeader read_header(std::istream& in) {
   for (double v : h.covariances) {
     if (!std::isfinite(v) || (!kept && v != 0.0)) corrupt("pose covariance");
   }
+  if (kept) check_pose_covariances(h.config.motion, h.covariances);
   return h;
 }
 

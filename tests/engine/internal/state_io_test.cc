@@ -214,6 +214,25 @@ TEST(StateIoTest, FieldsBreakingTheEnginesInvariantsAreRefusedByName) {
   fill(s2);
   s2.covariances.at<3>(1)(2, 2) = kNaN();
   expect_refused(s2, {}, "pose covariance");
+  // ... symmetric positive semi-definite (the proposal factors them), zero outside the block.
+  FilterState indefinite(fs2);
+  fill(indefinite);
+  indefinite.covariances.at<3>(0)(0, 1) = indefinite.covariances.at<3>(0)(1, 0) = 2.0;
+  expect_refused(indefinite, {}, "pose covariance of particle 0: not positive semi-definite");
+  FilterState asymmetric(fs2);
+  fill(asymmetric);
+  asymmetric.covariances.at<3>(1)(0, 2) = 0.25;
+  expect_refused(asymmetric, {}, "pose covariance of particle 1: not symmetric");
+  FilterState outside(fs2);
+  fill(outside);
+  outside.covariances.values()[PoseCovariances::kSlot + 20] = 1.0;
+  expect_refused(outside, {}, "pose covariance of particle 1: entry 20 outside the block");
+  FilterState semidefinite(fs2);
+  fill(semidefinite);
+  semidefinite.covariances.at<3>(0).setZero();  // after a scan: zero, and accepted
+  semidefinite.covariances.at<3>(1) << 1, 1, 0, 1, 1, 0, 0, 0, 1;  // singular, accepted
+  std::vector<TrajectoryPoint> none;
+  EXPECT_NO_THROW(round_trip(save(semidefinite, {}), &none));
   FilterConfig fs1;
   fs1.particles = 2;
   FilterState s1(fs1);
