@@ -2,63 +2,54 @@
 
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <stdexcept>
+#include <string_view>
 #include <utility>
 
 namespace fastslam::tools {
 
-// One output file of poses, buffered: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM.
+// One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, written to its
+// temporary as it comes and put in place by close().
 class RunRecorder::PoseFile {
  public:
   enum class Format { kCsv, kCsvPosition, kTum };
 
-  PoseFile(std::string path, Format format) : path_(std::move(path)), format_(format) {
-    file_.open(path_);
-    if (!file_) throw std::runtime_error("cannot write " + path_);
+  PoseFile(const std::string& path, Format format) : format_(format), file_(path) {
     switch (format_) {
       case Format::kCsv:
-        text_ = "t,x,y,theta\n";
+        file_.write("t,x,y,theta\n");
         break;
       case Format::kCsvPosition:
-        text_ = "t,x,y\n";
+        file_.write("t,x,y\n");
         break;
       case Format::kTum:
-        text_ = kTumHeader;
+        file_.write(kTumHeader);
         break;
     }
   }
 
+  // Throws std::runtime_error naming the file once a write has failed.
   void add(const StampedPose& p) {
     if (format_ == Format::kTum) {
-      append_tum(text_, p);
+      line_.clear();
+      append_tum(line_, p);
+      file_.write(line_);
     } else {
       char line[160];
       const int n = format_ == Format::kCsv
                         ? std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f,%.6f\n", p.time, p.x,
                                         p.y, p.theta)
                         : std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f\n", p.time, p.x, p.y);
-      text_.append(line, static_cast<std::size_t>(n));
+      file_.write(std::string_view(line, static_cast<std::size_t>(n)));
     }
-    if (text_.size() > (std::size_t{1} << 16)) flush();
   }
 
-  void close() {
-    flush();
-    file_.close();
-    if (!file_) throw std::runtime_error("write failed: " + path_);
-  }
+  void close() { file_.commit(); }
 
  private:
-  void flush() {
-    file_ << text_;
-    text_.clear();
-  }
-
-  std::string path_;
   Format format_;
-  std::ofstream file_;
-  std::string text_;
+  AtomicFile file_;
+  std::string line_;
 };
 
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
@@ -71,7 +62,6 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
       dr_truth_({.reference_heading = true, .rpe_delta = rpe_delta}),
       dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}) {
   if (!out_dir_.empty()) {
-    std::filesystem::create_directories(out_dir_);
     using F = PoseFile::Format;
     trajectory_csv_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv);
     trajectory_tum_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.tum", F::kTum);
@@ -147,10 +137,16 @@ void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
 
 RecordedRun RunRecorder::finish() {
   RecordedRun r;
+  // Each file on its own: one that failed leaves the others whole.
   auto close = [&](std::unique_ptr<PoseFile>& f, const char* name) {
     if (!f) return;
-    f->close();
-    r.files.emplace_back(name);
+    try {
+      f->close();
+      r.files.emplace_back(name);
+    } catch (const std::exception& e) {
+      r.errors.emplace_back(e.what());
+    }
+    f.reset();
   };
   close(trajectory_csv_, "trajectory.csv");
   close(trajectory_tum_, "trajectory.tum");
