@@ -115,9 +115,8 @@ void prepare_output_dir(const std::string& dir, std::span<const std::string> inp
     throw std::runtime_error(what + "exists and is not a directory");
   }
   std::error_code error;
-  fs::create_directories(dir, error);
-  if (error) throw std::runtime_error(what + "cannot create it: " + error.message());
-  const fs::path out = fs::canonical(dir);
+  const fs::path out = fs::weakly_canonical(dir, error);
+  if (error) throw std::runtime_error(what + error.message());
   for (const std::string& input : inputs) {
     if (input.empty() || input == "-") continue;
     const std::optional<fs::path> in = existing(input);
@@ -133,6 +132,8 @@ void prepare_output_dir(const std::string& dir, std::span<const std::string> inp
       }
     }
   }
+  fs::create_directories(dir, error);
+  if (error) throw std::runtime_error(what + "cannot create it: " + error.message());
   // A probe, so an unwritable directory is refused now rather than after the run.
   const std::string probe = dir + "/.fastslam-probe-" + std::to_string(::getpid());
   const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);

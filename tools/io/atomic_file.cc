@@ -59,7 +59,7 @@ AtomicFile::AtomicFile(const std::string& path) : path_(path), target_(resolve_o
   fd_ = ::open(temp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
   if (fd_ < 0) {
     const int e = errno;
-    throw std::runtime_error(path + ": cannot create " + temp_ + ": " + reason(e));
+    throw std::runtime_error(path + ": cannot open for writing: " + reason(e));
   }
   // A replaced file keeps its permissions.
   if (exists) (void)::fchmod(fd_, st.st_mode & 07777);

@@ -93,7 +93,7 @@ TEST_F(AtomicFileTest, ReplacingKeepsThePermissions) {
   put(p, "old");
   ASSERT_EQ(::chmod(p.c_str(), 0640), 0);
   write_file_atomically(p, "new");
-  struct stat st{};
+  struct stat st {};
   ASSERT_EQ(::stat(p.c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 07777, 0640u);
   EXPECT_EQ(read(p), "new");
@@ -142,7 +142,8 @@ TEST_F(AtomicFileTest, RefusesDirectoriesDevicesAndLinksToThem) {
 
 TEST_F(AtomicFileTest, AMissingDirectoryIsReportedAtOpening) {
   const std::string message = error_of(path("no/such/dir/out.csv"));
-  EXPECT_NE(message.find(path("no/such/dir/out.csv") + ": cannot create"), std::string::npos);
+  EXPECT_NE(message.find(path("no/such/dir/out.csv") + ": cannot open for writing"),
+            std::string::npos);
   EXPECT_NE(message.find("No such file or directory"), std::string::npos);
 }
 
