@@ -57,12 +57,20 @@ class TruthTracker {
         index_(points_) {
     for (std::size_t i = 0; i < landmarks.size(); ++i) slot_[landmarks[i].id] = i;
   }
-  void see(std::span<const engine::Observation> scan) {
+  // Marks the scan's landmarks observed; returns an id the truth lacks (when it has
+  // landmarks at all), the first of the scan's.
+  std::optional<std::int64_t> see(std::span<const engine::Observation> scan) {
+    std::optional<std::int64_t> unknown;
     for (const engine::Observation& z : scan) {
       if (z.id < 0) continue;
       const auto found = slot_.find(static_cast<std::uint64_t>(z.id));
-      if (found != slot_.end()) observed_flags_[found->second] = true;
+      if (found != slot_.end()) {
+        observed_flags_[found->second] = true;
+      } else if (!unknown && !landmarks_.empty()) {
+        unknown = z.id;
+      }
     }
+    return unknown;
   }
   std::span<const bool> observed() const { return {observed_flags_.get(), landmarks_.size()}; }
   std::size_t observed_count() const {
@@ -277,7 +285,14 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
               prepare_scan(loop, scan, r);
               filter.observe(scan, event.time);
             });
-            loop.truth.see(scan);
+            if (const std::optional<std::int64_t> id = loop.truth.see(scan);
+                id && !r.unknown_id_seen) {
+              // Said once, where it first happens: scoring by id will miss it.
+              r.unknown_id_seen = true;
+              r.warnings.push_back(record_of(loop, index, event, controls, scans) +
+                                   ": landmark id " + std::to_string(*id) +
+                                   " is not among the source's true landmarks");
+            }
             loop.recorder.estimates(filter.take_trajectory());
             if (loop.stream != nullptr) {
               loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
@@ -532,6 +547,7 @@ nlohmann::json run_once(const RunOptions& options) {
   r.trajectories = recorder.finish();
   // Every file that could not be written; the first is the run's failure.
   std::vector<std::string> errors = r.trajectories.errors;
+  for (const std::string& w : r.trajectories.warnings) warn_once(r, w);
   if (!errors.empty() && !r.failure) r.failure = errors.front();
   if (!info.landmarks.empty()) {
     std::optional<AlignedAte> alignment;

@@ -57,10 +57,10 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
     : reported_(reported),
       out_dir_(out_dir),
       dead_reckoning_(header.motion, header.start_pose, header.start_time),
-      filter_truth_({.reference_heading = true, .rpe_delta = rpe_delta}),
-      filter_gps_({.reference_heading = false, .rpe_delta = rpe_delta}),
-      dr_truth_({.reference_heading = true, .rpe_delta = rpe_delta}),
-      dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}) {
+      filter_truth_({.reference_heading = true, .rpe_delta = rpe_delta}, "pose error"),
+      filter_gps_({.reference_heading = false, .rpe_delta = rpe_delta}, "GPS error"),
+      dr_truth_({.reference_heading = true, .rpe_delta = rpe_delta}, "dead reckoning's pose error"),
+      dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}, "dead reckoning's GPS error") {
   if (!out_dir_.empty()) {
     using F = PoseFile::Format;
     trajectory_csv_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv);
@@ -69,15 +69,33 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
   // The start pose is scored (it is the estimate before the first control) but not written:
   // the files hold the poses after the controls.
   const StampedPose start = dead_reckoning_.pose();
-  filter_truth_.add_estimate(start);
-  filter_gps_.add_estimate(start);
+  filter_truth_.estimate(start);
+  filter_gps_.estimate(start);
   if (dead_reckoning_.available()) {
-    dr_truth_.add_estimate(start);
-    dr_gps_.add_estimate(start);
+    dr_truth_.estimate(start);
+    dr_gps_.estimate(start);
   }
 }
 
 RunRecorder::~RunRecorder() = default;
+
+void RunRecorder::Scored::estimate(const StampedPose& p) {
+  if (error) return;
+  try {
+    evaluator.add_estimate(p);
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+}
+
+void RunRecorder::Scored::reference(const StampedPose& p) {
+  if (error) return;
+  try {
+    evaluator.add_reference(p);
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+}
 
 RunRecorder::PoseFile& RunRecorder::file(std::unique_ptr<PoseFile>& slot, const char* name,
                                          bool position_only) {
@@ -93,15 +111,15 @@ void RunRecorder::control(const Event& e) {
   control_times_.push_back(e.time);
   dead_reckoning_.predict(e.control, e.dt, e.time);
   if (!dead_reckoning_.available()) return;
-  dr_truth_.add_estimate(dead_reckoning_.pose());
-  dr_gps_.add_estimate(dead_reckoning_.pose());
+  dr_truth_.estimate(dead_reckoning_.pose());
+  dr_gps_.estimate(dead_reckoning_.pose());
   if (!out_dir_.empty()) file(dr_csv_, "dead_reckoning.csv", false).add(dead_reckoning_.pose());
 }
 
 void RunRecorder::truth(const Event& e) {
   const StampedPose p{e.time, e.x, e.y, e.theta};
-  filter_truth_.add_reference(p);
-  if (dead_reckoning_.available()) dr_truth_.add_reference(p);
+  filter_truth_.reference(p);
+  if (dead_reckoning_.available()) dr_truth_.reference(p);
   last_truth_ = p;
   ++truth_poses_;
   if (!out_dir_.empty()) file(truth_csv_, "truth.csv", false).add(p);
@@ -109,8 +127,8 @@ void RunRecorder::truth(const Event& e) {
 
 void RunRecorder::gps(const Event& e) {
   const StampedPose p{e.time, e.x, e.y, 0.0};
-  filter_gps_.add_reference(p);
-  if (dead_reckoning_.available()) dr_gps_.add_reference(p);
+  filter_gps_.reference(p);
+  if (dead_reckoning_.available()) dr_gps_.reference(p);
   ++gps_fixes_;
   if (!out_dir_.empty()) file(gps_csv_, "gps.csv", true).add(p);
 }
@@ -126,8 +144,8 @@ void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
                         point.y + reported_.x * s + reported_.y * c, point.theta};
     control_times_.pop_front();
     ++first_pending_control_;
-    filter_truth_.add_estimate(p);
-    filter_gps_.add_estimate(p);
+    filter_truth_.estimate(p);
+    filter_gps_.estimate(p);
     if (trajectory_csv_) {
       trajectory_csv_->add(p);
       trajectory_tum_->add(p);
@@ -153,11 +171,22 @@ RecordedRun RunRecorder::finish() {
   close(truth_csv_, "truth.csv");
   close(gps_csv_, "gps.csv");
   close(dr_csv_, "dead_reckoning.csv");
-  if (truth_poses_ > 0) r.filter.truth = filter_truth_.finish();
-  if (gps_fixes_ > 0) r.filter.gps = filter_gps_.finish();
+  auto score = [&](Scored& s, std::optional<TrajectoryMetrics>& into) {
+    if (s.error) {
+      r.warnings.push_back(std::string(s.name) + " not computed: " + *s.error);
+      return;
+    }
+    try {
+      into = s.evaluator.finish();
+    } catch (const std::exception& e) {
+      r.warnings.push_back(std::string(s.name) + " not computed: " + e.what());
+    }
+  };
+  if (truth_poses_ > 0) score(filter_truth_, r.filter.truth);
+  if (gps_fixes_ > 0) score(filter_gps_, r.filter.gps);
   if (dead_reckoning_.available()) {
-    if (truth_poses_ > 0) r.dead_reckoning.truth = dr_truth_.finish();
-    if (gps_fixes_ > 0) r.dead_reckoning.gps = dr_gps_.finish();
+    if (truth_poses_ > 0) score(dr_truth_, r.dead_reckoning.truth);
+    if (gps_fixes_ > 0) score(dr_gps_, r.dead_reckoning.gps);
   }
   r.last_truth = last_truth_;
   r.truth_poses = truth_poses_;

@@ -41,6 +41,9 @@ struct RecordedRun {
   std::uint64_t truth_poses = 0, gps_fixes = 0;
   std::vector<std::string> files;   // written, in order
   std::vector<std::string> errors;  // one message per file that could not be written
+  // Scores given up on (a reference out of time order, a pose not finite): the files and the
+  // other scores stand.
+  std::vector<std::string> warnings;
 };
 
 class RunRecorder {
@@ -71,7 +74,18 @@ class RunRecorder {
   engine::SensorOffset reported_;
   std::string out_dir_;
   DeadReckoning dead_reckoning_;
-  TrajectoryEvaluator filter_truth_, filter_gps_, dr_truth_, dr_gps_;
+  // An evaluator that, once it refuses an input, is dropped with its message.
+  struct Scored {
+    Scored(const TrajectoryEvaluatorOptions& options, const char* what)
+        : evaluator(options), name(what) {}
+    void estimate(const StampedPose& p);
+    void reference(const StampedPose& p);
+    TrajectoryEvaluator evaluator;
+    const char* name;
+    std::optional<std::string> error;
+  };
+
+  Scored filter_truth_, filter_gps_, dr_truth_, dr_gps_;
   std::deque<double> control_times_;  // of controls not yet in an estimate batch
   std::uint64_t first_pending_control_ = 0;
   std::unique_ptr<PoseFile> trajectory_csv_, trajectory_tum_, truth_csv_, gps_csv_, dr_csv_;

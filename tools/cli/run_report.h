@@ -44,10 +44,10 @@ struct RunResult {
   engine::Estimate estimate;
   engine::FilterStatistics stats;
   RecordedRun trajectories;
-  std::optional<MapScores> map;          // when the source has true landmarks
-  double open_seconds = 0.0;             // opening the source: reading and parsing a recorded one
-  double source_seconds = 0.0;           // its events after that (for a simulator: simulating)
-  double filter_seconds = 0.0;           // the filter, trace rows excluded
+  std::optional<MapScores> map;  // when the source has true landmarks
+  double open_seconds = 0.0;     // opening the source: reading and parsing a recorded one
+  double source_seconds = 0.0;   // its events after that (for a simulator: simulating)
+  double filter_seconds = 0.0;   // the filter, trace rows excluded
   // Or "--max-steps", "--max-seconds", "input error", "error", "SIGINT", "SIGTERM".
   std::string ended_by = "end of data";
   std::optional<std::string> input_error;  // the source's message, when it ended the run
@@ -55,6 +55,7 @@ struct RunResult {
   int interrupted_by = 0;                  // the signal that ended it
   // Evaluation problems (truth that cannot score the estimate): reported, never fatal.
   std::vector<std::string> warnings;
+  bool unknown_id_seen = false;  // a scan's landmark id the truth lacks was warned of
   std::uint64_t unlabelled_discarded = 0;
 };
 
