@@ -155,11 +155,12 @@ class Outputs(unittest.TestCase):
                 self.assertEqual(f.read(), "an earlier run\n")
             self.assertEqual(read_metrics(out)["status"], "complete")
 
-    def interrupt(self, sig, out):
+    def interrupt(self, sig, out, extra=(), watch="."):
         """Starts the long run, sends `sig` once it is writing, returns the finished process."""
-        p = subprocess.Popen([FASTSLAM] + LONG + ["--out", out], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
-        temp = os.path.join(out, ".trajectory.csv.tmp-%d" % p.pid)
+        p = subprocess.Popen([FASTSLAM] + LONG + ["--out", out] + list(extra),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=default_signals)
+        temp = os.path.join(out, watch, ".trajectory.csv.tmp-%d" % p.pid)
         deadline = time.monotonic() + 120
         while not (os.path.exists(temp) and os.path.getsize(temp) > 0):
             self.assertIsNone(p.poll(), "the run ended before it was interrupted")
@@ -171,8 +172,11 @@ class Outputs(unittest.TestCase):
 
     def test_sigint_and_sigterm_write_the_run_so_far(self):
         for sig, code, name in [(signal.SIGINT, 130, "SIGINT"), (signal.SIGTERM, 143, "SIGTERM")]:
-            with self.subTest(name), tempfile.TemporaryDirectory() as out:
-                returncode, stdout, stderr = self.interrupt(sig, out)
+            with self.subTest(name), tempfile.TemporaryDirectory() as d:
+                out = os.path.join(d, "out")
+                trace = os.path.join(d, "trace.csv")
+                returncode, stdout, stderr = self.interrupt(
+                    sig, out, ["--trace", trace, "--trace-every", "20"])
                 self.assertEqual(returncode, code, stderr)
                 m = read_metrics(out)
                 self.assertEqual(m["status"], "interrupted")
@@ -185,6 +189,27 @@ class Outputs(unittest.TestCase):
                               "true_landmarks.csv"]:
                     self.assertTrue(os.path.exists(os.path.join(out, name_)), name_)
                 self.assertEqual(temporaries(out), [])
+                # The trace so far, in place and whole.
+                self.assertEqual(temporaries(d), [])
+                with open(trace) as f:
+                    rows = f.read().split("\n")
+                self.assertTrue(rows[0].startswith("t,scan,pose_error_m,"))
+                self.assertEqual(rows[-1], "")
+                self.assertGreater(len(rows), 2)
+                self.assertTrue(all(len(r.split(",")) == 11 for r in rows[1:-1]))
+
+    def test_interrupted_sweep_summarises_the_seeds_so_far(self):
+        with tempfile.TemporaryDirectory() as out:
+            returncode, stdout, stderr = self.interrupt(signal.SIGINT, out,
+                                                        ["--seeds", "1-3"], "seed-1")
+            self.assertEqual(returncode, 130, stderr)
+            self.assertEqual(sorted(os.listdir(out)), ["seed-1", "sweep.csv", "sweep.json"])
+            with open(os.path.join(out, "sweep.json")) as f:
+                sweep = json.load(f)
+            self.assertEqual(sweep["status"], "interrupted")
+            self.assertEqual(len(sweep["per_seed"]), 1)
+            self.assertEqual(sweep["per_seed"][0]["status"], "interrupted")
+            self.assertEqual(read_metrics(os.path.join(out, "seed-1"))["status"], "interrupted")
 
     def test_second_sigint_kills_at_once(self):
         with tempfile.TemporaryDirectory() as out:
