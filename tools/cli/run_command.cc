@@ -254,69 +254,66 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     }
     const auto t1 = Clock::now();
     double trace_seconds = 0.0;
+    // What the filter refuses (std::invalid_argument: the record, the filter unchanged) or fails
+    // on (std::runtime_error: a numerical failure) is rethrown naming the record.
+    const auto located = [&](auto&& call) {
+      try {
+        call();
+      } catch (const std::exception& e) {
+        if (dynamic_cast<const std::invalid_argument*>(&e) == nullptr &&
+            dynamic_cast<const std::runtime_error*>(&e) == nullptr) {
+          throw;
+        }
+        throw std::runtime_error(record_of(loop, index, event, controls, scans) + ": " +
+                                 e.what());
+      }
+    };
     try {
-      // What the filter refuses (std::invalid_argument: the record, the filter unchanged) or fails
-      // on (std::runtime_error: a numerical failure) is rethrown naming the record.
-      const auto located = [&](auto&& call) {
-        try {
-          call();
-        } catch (const std::exception& e) {
-          if (dynamic_cast<const std::invalid_argument*>(&e) == nullptr &&
-              dynamic_cast<const std::runtime_error*>(&e) == nullptr) {
-            throw;
+      switch (event.kind) {
+        case EventKind::kControl:
+          if (loop.options.max_steps && controls == *loop.options.max_steps) {
+            r.ended_by = "--max-steps";
+            break;
           }
-          throw std::runtime_error(record_of(loop, index, event, controls, scans) + ": " +
-                                   e.what());
-        }
-      };
-      {
-        switch (event.kind) {
-          case EventKind::kControl:
-            if (loop.options.max_steps && controls == *loop.options.max_steps) {
-              r.ended_by = "--max-steps";
-              break;
-            }
-            located([&] { filter.predict(event.control, event.dt, event.time); });
-            ++controls;
-            loop.recorder.control(event);
-            break;
-          case EventKind::kScan:
-            located([&] {
-              prepare_scan(loop, scan, r);
-              filter.observe(scan, event.time);
-            });
-            if (const std::optional<std::int64_t> id = loop.truth.see(scan);
-                id && !r.unknown_id_seen) {
-              // Said once, where it first happens: scoring by id will miss it.
-              r.unknown_id_seen = true;
-              r.warnings.push_back(record_of(loop, index, event, controls, scans) +
-                                   ": landmark id " + std::to_string(*id) +
-                                   " is not among the source's true landmarks");
-            }
-            loop.recorder.estimates(filter.take_trajectory());
-            if (loop.stream != nullptr) {
-              loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
-                                 seconds_since(t0));
-            }
-            ++scans;
-            if (loop.trace != nullptr && loop.trace->due()) {
-              const auto t_trace = Clock::now();
-              trace_row(filter, loop, last_truth, event.time, r);
-              trace_seconds = seconds_since(t_trace);
-            }
-            if (loop.progress.due()) {
-              observe_state(filter, loop.state);
-              loop.progress.draw(loop.state);
-            }
-            break;
-          case EventKind::kTruthPose:
-            loop.recorder.truth(event);
-            last_truth = StampedPose{event.time, event.x, event.y, event.theta};
-            break;
-          case EventKind::kGps:
-            loop.recorder.gps(event);
-            break;
-        }
+          located([&] { filter.predict(event.control, event.dt, event.time); });
+          ++controls;
+          loop.recorder.control(event);
+          break;
+        case EventKind::kScan:
+          located([&] {
+            prepare_scan(loop, scan, r);
+            filter.observe(scan, event.time);
+          });
+          if (const std::optional<std::int64_t> id = loop.truth.see(scan);
+              id && !r.unknown_id_seen) {
+            // Said once, where it first happens: scoring by id will miss it.
+            r.unknown_id_seen = true;
+            r.warnings.push_back(record_of(loop, index, event, controls, scans) + ": landmark id " +
+                                 std::to_string(*id) + " is not among the source's true landmarks");
+          }
+          loop.recorder.estimates(filter.take_trajectory());
+          if (loop.stream != nullptr) {
+            loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
+                               seconds_since(t0));
+          }
+          ++scans;
+          if (loop.trace != nullptr && loop.trace->due()) {
+            const auto t_trace = Clock::now();
+            trace_row(filter, loop, last_truth, event.time, r);
+            trace_seconds = seconds_since(t_trace);
+          }
+          if (loop.progress.due()) {
+            observe_state(filter, loop.state);
+            loop.progress.draw(loop.state);
+          }
+          break;
+        case EventKind::kTruthPose:
+          loop.recorder.truth(event);
+          last_truth = StampedPose{event.time, event.x, event.y, event.theta};
+          break;
+        case EventKind::kGps:
+          loop.recorder.gps(event);
+          break;
       }
     } catch (const std::exception& e) {
       // The filter's refusal or failure, a file that cannot be written: the run ends here and
