@@ -504,7 +504,11 @@ int run_simulation(const RunOptions& options) {
 
 nlohmann::json run_once(const RunOptions& options) {
   // Before any work: a run that cannot write its results does not start.
-  if (!options.out.empty()) prepare_output_dir(options.out, run_inputs(options), kRunFileNames);
+  const std::vector<std::string> input_paths = run_inputs(options);
+  if (!options.out.empty()) prepare_output_dir(options.out, input_paths, kRunFileNames);
+  if (!options.trace.empty()) {
+    check_output_file("--trace", options.trace, input_paths, options.out, kRunFileNames);
+  }
   // Hashed before the source reads them: what this run is about to read.
   nlohmann::json inputs = options.hash_inputs ? input_files_json(options) : nlohmann::json();
   RunResult r;

@@ -160,6 +160,30 @@ void prepare_output_dir(const std::string& dir, std::span<const std::string> inp
   }
 }
 
+void check_output_file(const std::string& option, const std::string& path,
+                        std::span<const std::string> inputs, const std::string& dir,
+                        std::span<const char* const> names) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  const fs::path file = fs::weakly_canonical(resolve_output_path(path), error);
+  if (error) return;  // AtomicFile reports it
+  for (const std::string& input : inputs) {
+    if (input.empty() || input == "-") continue;
+    if (const std::optional<fs::path> in = existing(input); in && *in == file) {
+      throw std::runtime_error(option + " " + path + ": is the input " + input +
+                               ": give another file");
+    }
+  }
+  if (dir.empty()) return;
+  const fs::path out = fs::weakly_canonical(dir, error);
+  for (const char* name : names) {
+    if (!error && file == out / name) {
+      throw std::runtime_error(option + " " + path + ": is the run's own " + name +
+                               ": give another file");
+    }
+  }
+}
+
 std::vector<std::string> write_run_files(const std::string& dir, const RunFiles& files,
                                          std::FILE* out) {
   std::vector<std::string> errors;

@@ -65,6 +65,12 @@ inline constexpr const char* kRunFileNames[] = {
 void prepare_output_dir(const std::string& dir, std::span<const std::string> inputs,
                         std::span<const char* const> names);
 
+// Refuses (std::runtime_error "OPTION PATH: ...") an output file `path` that is one of `inputs`
+// or, in `dir` (may be empty), one of the run's `names`.
+void check_output_file(const std::string& option, const std::string& path,
+                       std::span<const std::string> inputs, const std::string& dir,
+                       std::span<const char* const> names);
+
 // What a run writes at its end.
 struct RunFiles {
   nlohmann::json* metrics = nullptr;      // its "status" set to failed when a file fails

@@ -54,6 +54,12 @@ REFUSED = [
      ["run", "--landmarks-csv", "{dir}/o/truth.csv", "--out", "{dir}/o"],
      {"o/": None, "o/truth.csv": "id,x_m,y_m\n1,0,0\n"},
      "the run would replace its input {dir}/o/truth.csv"),
+    ("--trace is an input",
+     ["run", "--source", "log", "--data", "{dir}/in.log", "--trace", "{dir}/in.log"],
+     {"in.log": "x"}, "--trace {dir}/in.log: is the input {dir}/in.log"),
+    ("--trace is one of the run's files",
+     ["run", "--out", "{dir}", "--trace", "{dir}/metrics.json"], {},
+     "--trace {dir}/metrics.json: is the run's own metrics.json"),
 ]
 
 
