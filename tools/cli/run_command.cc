@@ -264,8 +264,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             dynamic_cast<const std::runtime_error*>(&e) == nullptr) {
           throw;
         }
-        throw std::runtime_error(record_of(loop, index, event, controls, scans) + ": " +
-                                 e.what());
+        throw std::runtime_error(record_of(loop, index, event, controls, scans) + ": " + e.what());
       }
     };
     try {

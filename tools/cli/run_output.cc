@@ -161,8 +161,8 @@ void prepare_output_dir(const std::string& dir, std::span<const std::string> inp
 }
 
 void check_output_file(const std::string& option, const std::string& path,
-                        std::span<const std::string> inputs, const std::string& dir,
-                        std::span<const char* const> names) {
+                       std::span<const std::string> inputs, const std::string& dir,
+                       std::span<const char* const> names) {
   namespace fs = std::filesystem;
   std::error_code error;
   const fs::path file = fs::weakly_canonical(resolve_output_path(path), error);
