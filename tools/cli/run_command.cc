@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 #include <numbers>
 #include <optional>
@@ -22,6 +21,7 @@
 #include "engine/enum_names.h"
 #include "engine/filter.h"
 #include "tools/cli/build_info.h"
+#include "tools/cli/interrupt.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
 #include "tools/cli/run_provenance.h"
@@ -32,6 +32,7 @@
 #include "tools/eval/map_metrics.h"
 #include "tools/eval/particle_diagnostics.h"
 #include "tools/eval/trajectory_errors.h"
+#include "tools/io/atomic_file.h"
 #include "tools/io/log_format.h"
 #include "tools/io/tum.h"
 #include "tools/sim/world.h"
@@ -56,12 +57,20 @@ class TruthTracker {
         index_(points_) {
     for (std::size_t i = 0; i < landmarks.size(); ++i) slot_[landmarks[i].id] = i;
   }
-  void see(std::span<const engine::Observation> scan) {
+  // Marks the scan's landmarks observed; returns an id the truth lacks (when it has
+  // landmarks at all), the first of the scan's.
+  std::optional<std::int64_t> see(std::span<const engine::Observation> scan) {
+    std::optional<std::int64_t> unknown;
     for (const engine::Observation& z : scan) {
       if (z.id < 0) continue;
       const auto found = slot_.find(static_cast<std::uint64_t>(z.id));
-      if (found != slot_.end()) observed_flags_[found->second] = true;
+      if (found != slot_.end()) {
+        observed_flags_[found->second] = true;
+      } else if (!unknown && !landmarks_.empty()) {
+        unknown = z.id;
+      }
     }
+    return unknown;
   }
   std::span<const bool> observed() const { return {observed_flags_.get(), landmarks_.size()}; }
   std::size_t observed_count() const {
@@ -141,8 +150,16 @@ void observe_state(F& filter, ProgressState& state) {
   state.map_bytes = st.live_bytes;
 }
 
+// Adds `warning` to the run's unless it is there already.
+void warn_once(RunResult& r, const std::string& warning) {
+  if (std::find(r.warnings.begin(), r.warnings.end(), warning) == r.warnings.end()) {
+    r.warnings.push_back(warning);
+  }
+}
+
 template <class F>
-void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth, double time) {
+void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth, double time,
+               RunResult& r) {
   const engine::Estimate now = filter.estimate();
   if (truth && time - truth->time > kMaxInterpolationGap) truth.reset();
   std::optional<double> pose_error;
@@ -154,8 +171,13 @@ void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth,
   }
   std::optional<double> map_error;
   if (!loop.source.info().landmarks.empty()) {
-    map_error = loop.truth.rmse(now.map, loop.association.engine == engine::Association::kKnown,
-                                *loop.options.match_radius);
+    // The truth failing to score the map (an id it lacks) leaves the value empty, not the run.
+    try {
+      map_error = loop.truth.rmse(now.map, loop.association.engine == engine::Association::kKnown,
+                                  *loop.options.match_radius);
+    } catch (const std::runtime_error& e) {
+      warn_once(r, std::string("--trace landmark_rmse_m: ") + e.what());
+    }
   }
   loop.trace->row(time, pose_error, map_error, now.map.size(), loop.truth.observed_count(),
                   particles);
@@ -211,6 +233,11 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
   std::uint64_t controls = 0, scans = 0;
   for (std::uint64_t index = 0;; ++index) {
     const auto t0 = Clock::now();
+    if (const int signal = interrupt_signal(); signal != 0) {
+      r.ended_by = interrupt_name(signal);
+      r.interrupted_by = signal;
+      break;
+    }
     if (loop.options.max_seconds &&
         std::chrono::duration<double>(t0 - start).count() >= *loop.options.max_seconds) {
       r.ended_by = "--max-seconds";
@@ -237,11 +264,10 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             dynamic_cast<const std::runtime_error*>(&e) == nullptr) {
           throw;
         }
-        throw std::runtime_error(record_of(loop, index, event, controls, scans) + ": " +
-                                 e.what());
+        throw std::runtime_error(record_of(loop, index, event, controls, scans) + ": " + e.what());
       }
     };
-    {
+    try {
       switch (event.kind) {
         case EventKind::kControl:
           if (loop.options.max_steps && controls == *loop.options.max_steps) {
@@ -257,7 +283,13 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             prepare_scan(loop, scan, r);
             filter.observe(scan, event.time);
           });
-          loop.truth.see(scan);
+          if (const std::optional<std::int64_t> id = loop.truth.see(scan);
+              id && !r.unknown_id_seen) {
+            // Said once, where it first happens: scoring by id will miss it.
+            r.unknown_id_seen = true;
+            r.warnings.push_back(record_of(loop, index, event, controls, scans) + ": landmark id " +
+                                 std::to_string(*id) + " is not among the source's true landmarks");
+          }
           loop.recorder.estimates(filter.take_trajectory());
           if (loop.stream != nullptr) {
             loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
@@ -266,7 +298,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
           ++scans;
           if (loop.trace != nullptr && loop.trace->due()) {
             const auto t_trace = Clock::now();
-            trace_row(filter, loop, last_truth, event.time);
+            trace_row(filter, loop, last_truth, event.time, r);
             trace_seconds = seconds_since(t_trace);
           }
           if (loop.progress.due()) {
@@ -282,6 +314,12 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
           loop.recorder.gps(event);
           break;
       }
+    } catch (const std::exception& e) {
+      // The filter's refusal or failure, a file that cannot be written: the run ends here and
+      // writes what it has; run_once raises the error after that.
+      r.ended_by = "error";
+      r.failure = e.what();
+      break;
     }
     r.source_seconds += std::chrono::duration<double>(t1 - t0).count();
     r.filter_seconds += seconds_since(t1);
@@ -289,11 +327,21 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     if (r.ended_by != "end of data") break;
   }
   const auto t_end = Clock::now();
-  r.estimate = filter.estimate();
-  loop.recorder.estimates(filter.take_trajectory());
+  try {
+    r.estimate = filter.estimate();
+    loop.recorder.estimates(filter.take_trajectory());
+  } catch (const std::exception& e) {
+    if (!r.failure) r.failure = e.what();
+  }
   r.filter_seconds += seconds_since(t_end);
   r.stats = filter.statistics();
-  if (loop.trace != nullptr) loop.trace->close();
+  if (loop.trace != nullptr) {
+    try {
+      loop.trace->close();
+    } catch (const std::exception& e) {
+      if (!r.failure) r.failure = e.what();
+    }
+  }
   if (loop.progress.enabled()) {
     observe_state(filter, loop.state);
     loop.state.total = loop.state.done;  // the expected total was an estimate; the run is done
@@ -441,12 +489,25 @@ AssociationChoice resolve_association(const std::string& mode, const SourceInfo&
   return c;
 }
 
+std::vector<std::string> run_inputs(const RunOptions& o) {
+  std::vector<std::string> inputs = {o.config, o.data};
+  if (o.source == "sim") inputs.insert(inputs.end(), {o.landmarks_csv, o.waypoints_csv});
+  return inputs;
+}
+
 int run_simulation(const RunOptions& options) {
-  run_once(options);
-  return 0;
+  const InterruptHandlers handlers;
+  const nlohmann::json metrics = run_once(options);
+  return metrics["status"] == "interrupted" ? 128 + interrupt_signal() : 0;
 }
 
 nlohmann::json run_once(const RunOptions& options) {
+  // Before any work: a run that cannot write its results does not start.
+  const std::vector<std::string> input_paths = run_inputs(options);
+  if (!options.out.empty()) prepare_output_dir(options.out, input_paths, kRunFileNames);
+  if (!options.trace.empty()) {
+    check_output_file("--trace", options.trace, input_paths, options.out, kRunFileNames);
+  }
   // Hashed before the source reads them: what this run is about to read.
   nlohmann::json inputs = options.hash_inputs ? input_files_json(options) : nlohmann::json();
   RunResult r;
@@ -484,11 +545,21 @@ nlohmann::json run_once(const RunOptions& options) {
     drive(filter, loop, r);
   }
   r.trajectories = recorder.finish();
+  // Every file that could not be written; the first is the run's failure.
+  std::vector<std::string> errors = r.trajectories.errors;
+  for (const std::string& w : r.trajectories.warnings) warn_once(r, w);
+  if (!errors.empty() && !r.failure) r.failure = errors.front();
   if (!info.landmarks.empty()) {
     std::optional<AlignedAte> alignment;
     if (r.trajectories.filter.truth) alignment = r.trajectories.filter.truth->aligned;
-    r.map = truth.scores(r.estimate.map, association.engine == engine::Association::kKnown,
-                         *resolved.match_radius, alignment);
+    // A truth that cannot score the map (an estimated id it lacks) is a warning: the estimate
+    // stands.
+    try {
+      r.map = truth.scores(r.estimate.map, association.engine == engine::Association::kKnown,
+                           *resolved.match_radius, alignment);
+    } catch (const std::runtime_error& e) {
+      warn_once(r, std::string("landmark evaluation: ") + e.what());
+    }
   }
   const RunSettings settings{resolved, info, config, association, particles};
   nlohmann::json metrics = metrics_json(settings, r);
@@ -499,15 +570,29 @@ nlohmann::json run_once(const RunOptions& options) {
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;
   if (!options.quiet) print_summary(settings, r, text);
+  for (const std::string& w : r.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   if (!options.out.empty()) {
-    write_run_files(options.out,
-                    {.metrics = &metrics,
-                     .streamed = r.trajectories.files,
-                     .map = r.estimate.map,
-                     .true_landmarks = info.landmarks,
-                     .quiet = options.quiet},
-                    text);
-    if (!options.plot_script.empty()) draw_map(options.plot_script, options.out, text);
+    const std::vector<std::string> more = write_run_files(options.out,
+                                                          {.metrics = &metrics,
+                                                           .streamed = r.trajectories.files,
+                                                           .map = r.estimate.map,
+                                                           .true_landmarks = info.landmarks,
+                                                           .quiet = options.quiet},
+                                                          text);
+    if (!more.empty() && !r.failure) r.failure = more.front();
+    errors.insert(errors.end(), more.begin(), more.end());
+    if (errors.empty() && !options.plot_script.empty()) {
+      draw_map(options.plot_script, options.out, text);
+    }
+  }
+  for (const std::string& e : errors) {
+    if (e != r.failure) std::fprintf(stderr, "fastslam: error: %s\n", e.c_str());
+  }
+  if (r.failure) {
+    throw std::runtime_error(*r.failure + (options.out.empty()
+                                               ? std::string()
+                                               : "; what the run had is in " + options.out +
+                                                     " (metrics.json: \"status\")"));
   }
   if (r.input_error) {
     throw std::runtime_error(*r.input_error + (options.out.empty()
@@ -530,31 +615,38 @@ engine::FilterConfig run_filter_config(const RunOptions& options) {
 
 int convert_to_log(const RunOptions& options) {
   if (options.out.empty()) throw std::invalid_argument("convert needs --out FILE.log");
+  std::error_code error;
+  if (!options.data.empty() && options.data != "-" &&
+      std::filesystem::equivalent(options.out, options.data, error)) {
+    throw std::runtime_error("--out " + options.out + " is the input --data " + options.data +
+                             ": give another file");
+  }
+  // Before any work: a directory, a device or an uncreatable path is refused here.
+  AtomicFile file(options.out);
+  const InterruptHandlers handlers;
   SourceOptions so = source_options(options);
   so.clutter = true;
   const std::unique_ptr<Source> source = find_source(options.source).open(so);
   const SourceInfo& info = source->info();
   if (!info.summary.empty()) std::printf("%s\n", info.summary.c_str());
-  const std::string partial = options.out + ".partial";
   std::size_t events = 0;
-  try {
-    std::ofstream file(partial);
-    if (!file) throw std::runtime_error(partial + ": cannot open for writing");
-    LogWriter writer(file, info.header);
-    for (const TruthLandmark& l : info.landmarks) writer.landmark(l);
-    Event e;
-    std::vector<engine::Observation> scan;
-    while (source->next(e, scan)) {
-      write_event(writer, e, scan);
-      ++events;
+  LogWriter writer(file.stream(), info.header);
+  for (const TruthLandmark& l : info.landmarks) writer.landmark(l);
+  Event e;
+  std::vector<engine::Observation> scan;
+  while (source->next(e, scan)) {
+    if (const int signal = interrupt_signal(); signal != 0) {
+      // A log cut short would read as a whole one: nothing is written.
+      file.discard();
+      std::fprintf(stderr, "fastslam: %s: stopped; %s left as it was\n", interrupt_name(signal),
+                   options.out.c_str());
+      return 128 + signal;
     }
-    file.close();
-    if (!file) throw std::runtime_error(partial + ": write failed");
-  } catch (...) {
-    std::filesystem::remove(partial);
-    throw;
+    write_event(writer, e, scan);
+    if (file.failed()) file.flush();  // throws naming the file and the reason
+    ++events;
   }
-  std::filesystem::rename(partial, options.out);
+  file.commit();
   std::printf("wrote %zu events to %s\n", events, options.out.c_str());
   return 0;
 }

@@ -150,10 +150,17 @@ std::vector<std::string> motion_choices();
 // for "odometry" or any other name.
 engine::MotionKind no_odometry_kind(const std::string& motion);
 
-// `fastslam run` on any source; returns the process exit code. Throws std::exception with a
-// clear message on bad options or unreadable files.
+// The files a run reads (--config, --data, the world CSVs), which --out must not be or hold.
+std::vector<std::string> run_inputs(const RunOptions& options);
+
+// `fastslam run` on any source; returns the process exit code: 0, or 128 + the signal when
+// SIGINT or SIGTERM stopped it (tools/cli/interrupt.h; the results so far are written, with
+// "status": "interrupted"). Throws std::exception with a clear message on bad options,
+// unreadable files, or a failure after the start (the results so far written first, with
+// "status": "failed: REASON").
 int run_simulation(const RunOptions& options);
-// The same, returning the run's metrics.json object.
+// The same, returning the run's metrics.json object. The output directory is checked and
+// cleared of an earlier run's files before any work (tools/cli/run_output.h).
 nlohmann::json run_once(const RunOptions& options);
 // The filter configuration run_once(options) builds: the source opened for its header and its
 // recommendations, the association resolved. For replaying a source through a Filter of one's
@@ -162,7 +169,9 @@ engine::FilterConfig run_filter_config(const RunOptions& options);
 
 // `fastslam convert`: writes any source's events, header and true landmarks (a simulated
 // source passes its false alarms on) as a native log to the file `options.out`, which appears
-// only when complete.
+// only when complete (tools/io/atomic_file.h: a symlink is written through; a directory or a
+// device is refused). SIGINT or SIGTERM stop it, leaving `out` as it was, and it returns
+// 128 + the signal.
 int convert_to_log(const RunOptions& options);
 
 }  // namespace fastslam::tools

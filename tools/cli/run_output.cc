@@ -1,11 +1,14 @@
 #include "tools/cli/run_output.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fcntl.h>
 #include <filesystem>
 #include <spawn.h>
 #include <stdexcept>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <vector>
@@ -15,33 +18,58 @@
 namespace fastslam::tools {
 namespace {
 
-void write_map_csv(std::ofstream& file, std::span<const engine::MapLandmark> map) {
-  file << "id,x,y,sxx,sxy,syy\n";
+void write_map_csv(AtomicFile& file, std::span<const engine::MapLandmark> map) {
+  file.write("id,x,y,sxx,sxy,syy\n");
   char line[200];
   for (const engine::MapLandmark& l : map) {
     std::snprintf(line, sizeof(line), "%llu,%.6f,%.6f,%.9g,%.9g,%.9g\n",
                   static_cast<unsigned long long>(l.id), l.x, l.y, l.sxx, l.sxy, l.syy);
-    file << line;
+    file.write(line);
   }
 }
 
-void write_true_landmarks_csv(std::ofstream& file, std::span<const TruthLandmark> landmarks) {
-  file << "id,x,y\n";
+void write_true_landmarks_csv(AtomicFile& file, std::span<const TruthLandmark> landmarks) {
+  file.write("id,x,y\n");
   char line[120];
   for (const TruthLandmark& l : landmarks) {
     std::snprintf(line, sizeof(line), "%llu,%.6f,%.6f\n", static_cast<unsigned long long>(l.id),
                   l.x, l.y);
-    file << line;
+    file.write(line);
   }
+}
+
+// `path`, whose error the caller wraps, as "--trace PATH: ...".
+AtomicFile open_trace(const std::string& path) {
+  try {
+    return AtomicFile(path);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(std::string("--trace ") + e.what());
+  }
+}
+
+// The canonical form of `path` when it exists.
+std::optional<std::filesystem::path> existing(const std::string& path) {
+  std::error_code error;
+  std::filesystem::path p = std::filesystem::canonical(path, error);
+  if (error) return std::nullopt;
+  return p;
+}
+
+bool inside(const std::filesystem::path& child, const std::filesystem::path& parent) {
+  auto c = child.begin();
+  for (auto p = parent.begin(); p != parent.end(); ++p, ++c) {
+    if (c == child.end() || *c != *p) return false;
+  }
+  return true;
 }
 
 }  // namespace
 
 TraceWriter::TraceWriter(const std::string& path, std::uint64_t every)
-    : path_(path), every_(every == 0 ? 1 : every), file_(path) {
-  if (!file_) throw std::runtime_error("--trace " + path + ": cannot open for writing");
-  file_ << "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks,n_eff,"
-           "distinct_particles,particle_spread_m,truth_spreads,nearest_weight\n";
+    : every_(every == 0 ? 1 : every), file_(open_trace(path)) {
+  file_.write(
+      "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks,n_eff,"
+      "distinct_particles,particle_spread_m,truth_spreads,nearest_weight\n");
 }
 
 void TraceWriter::row(double t, std::optional<double> pose_error, std::optional<double> map_error,
@@ -67,35 +95,132 @@ void TraceWriter::row(double t, std::optional<double> pose_error, std::optional<
     n += std::snprintf(line + n, sizeof(line) - n, ",,,,");
   }
   std::snprintf(line + n, sizeof(line) - n, "\n");
-  file_ << line;
+  file_.write(line);
 }
 
 void TraceWriter::close() {
-  file_.close();
-  if (!file_) throw std::runtime_error("--trace " + path_ + ": write failed");
+  try {
+    file_.commit();
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(std::string("--trace ") + e.what());
+  }
 }
 
-void write_run_files(const std::string& dir, const RunFiles& files, std::FILE* out) {
-  std::filesystem::create_directories(dir);
-  auto open = [&](const std::string& name) {
-    std::ofstream file(dir + "/" + name);
-    if (!file) throw std::runtime_error("cannot write " + dir + "/" + name);
-    return file;
+void prepare_output_dir(const std::string& dir, std::span<const std::string> inputs,
+                        std::span<const char* const> names) {
+  namespace fs = std::filesystem;
+  const std::string what = "--out " + dir + ": ";
+  struct stat st {};
+  if (::stat(dir.c_str(), &st) == 0 && !S_ISDIR(st.st_mode)) {
+    throw std::runtime_error(what + "exists and is not a directory");
+  }
+  std::error_code error;
+  const fs::path out = fs::weakly_canonical(dir, error);
+  if (error) throw std::runtime_error(what + error.message());
+  for (const std::string& input : inputs) {
+    if (input.empty() || input == "-") continue;
+    const std::optional<fs::path> in = existing(input);
+    if (!in) continue;
+    if (inside(out, *in)) {
+      throw std::runtime_error(what + (out == *in ? "is the input " : "is inside the input ") +
+                               input + ": give another directory");
+    }
+    for (const char* name : names) {
+      if (*in == out / name) {
+        throw std::runtime_error(what + "the run would replace its input " + input +
+                                 ": give another directory");
+      }
+    }
+  }
+  fs::create_directories(dir, error);
+  if (error) throw std::runtime_error(what + "cannot create it: " + error.message());
+  // A probe, so an unwritable directory is refused now rather than after the run.
+  const std::string probe = dir + "/.fastslam-probe-" + std::to_string(::getpid());
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  if (fd < 0) {
+    throw std::runtime_error(what + "cannot write there: " + std::strerror(errno));
+  }
+  ::close(fd);
+  ::unlink(probe.c_str());
+  // An earlier run's files, so this one's never sit beside them; nothing else is touched.
+  for (const fs::directory_entry& entry : fs::directory_iterator(out)) {
+    const std::string file = entry.path().filename().string();
+    for (const char* name : names) {
+      const std::string temp = std::string(".") + name + ".tmp-";
+      if (file != name && !file.starts_with(temp)) continue;
+      if (entry.is_directory(error)) {
+        throw std::runtime_error(what + "holds a directory named " + file +
+                                 ", where the run writes a file");
+      }
+      if (!fs::remove(entry.path(), error) && error) {
+        throw std::runtime_error(what + "cannot remove the earlier run's " + file + ": " +
+                                 error.message());
+      }
+    }
+  }
+}
+
+void check_output_file(const std::string& option, const std::string& path,
+                       std::span<const std::string> inputs, const std::string& dir,
+                       std::span<const char* const> names) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  const fs::path file = fs::weakly_canonical(resolve_output_path(path), error);
+  if (error) return;  // AtomicFile reports it
+  for (const std::string& input : inputs) {
+    if (input.empty() || input == "-") continue;
+    if (const std::optional<fs::path> in = existing(input); in && *in == file) {
+      throw std::runtime_error(option + " " + path + ": is the input " + input +
+                               ": give another file");
+    }
+  }
+  if (dir.empty()) return;
+  const fs::path out = fs::weakly_canonical(dir, error);
+  for (const char* name : names) {
+    if (!error && file == out / name) {
+      throw std::runtime_error(option + " " + path + ": is the run's own " + name +
+                               ": give another file");
+    }
+  }
+}
+
+std::vector<std::string> write_run_files(const std::string& dir, const RunFiles& files,
+                                         std::FILE* out) {
+  std::vector<std::string> errors;
+  std::vector<std::string> written;
+  const auto attempt = [&](const char* name, auto&& write) {
+    try {
+      AtomicFile file(dir + "/" + name);
+      write(file);
+      file.commit();
+      written.emplace_back(name);
+    } catch (const std::exception& e) {
+      errors.emplace_back(e.what());
+    }
   };
-  open("metrics.json") << files.metrics->dump(2) << '\n';
-  {
-    std::ofstream file = open("landmarks.csv");
-    write_map_csv(file, files.map);
-  }
-  std::string written = "metrics.json";
-  for (const std::string& name : files.streamed) written += "," + name;
-  written += ",landmarks.csv";
+  attempt("landmarks.csv", [&](AtomicFile& f) { write_map_csv(f, files.map); });
   if (!files.true_landmarks.empty()) {
-    std::ofstream file = open("true_landmarks.csv");
-    write_true_landmarks_csv(file, files.true_landmarks);
-    written += ",true_landmarks.csv";
+    attempt("true_landmarks.csv",
+            [&](AtomicFile& f) { write_true_landmarks_csv(f, files.true_landmarks); });
   }
-  if (!files.quiet) std::fprintf(out, "  wrote %s/{%s}\n", dir.c_str(), written.c_str());
+  nlohmann::json& metrics = *files.metrics;
+  if (!errors.empty() && metrics.value("status", "") == "complete") {
+    metrics["status"] = "failed: " + errors.front();
+  }
+  attempt("metrics.json", [&](AtomicFile& f) { f.write(metrics.dump(2) + '\n'); });
+  // The list in the order a reader expects: metrics, the streamed files, the map, the truth.
+  std::string list;
+  const auto add = [&](const std::string& name) {
+    if (std::find(written.begin(), written.end(), name) == written.end()) return;
+    list += (list.empty() ? "" : ",") + name;
+  };
+  add("metrics.json");
+  for (const std::string& name : files.streamed) list += (list.empty() ? "" : ",") + name;
+  add("landmarks.csv");
+  add("true_landmarks.csv");
+  if (!files.quiet && !list.empty())
+    std::fprintf(out, "  wrote %s/{%s}\n", dir.c_str(), list.c_str());
+  return errors;
 }
 
 void draw_map(const std::string& script, const std::string& dir, std::FILE* out) {

@@ -1,7 +1,9 @@
-// What `fastslam run` writes at its end: metrics.json, landmarks.csv and true_landmarks.csv
-// (when the source has them) in the output directory, beside the files streamed while it ran
+// What `fastslam run` writes: the output directory checked and cleared of an earlier run's
+// files before any work; at the end landmarks.csv, true_landmarks.csv (when the source has
+// them) and, last, metrics.json, beside the files streamed while it ran
 // (tools/cli/run_recorder.h); the `--trace` CSV of errors over time; and the map picture drawn
-// by a plot script.
+// by a plot script. Every file goes through tools/io/atomic_file.h: it appears whole or not at
+// all.
 //
 // Ownership: borrows its inputs for the call; TraceWriter owns its file.
 // Thread safety: thread-compatible. Costs: O(rows written); draw_map waits for the script.
@@ -10,15 +12,16 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
-#include <fstream>
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json_fwd.hpp>
 
 #include "engine/filter.h"
 #include "tools/eval/particle_diagnostics.h"
+#include "tools/io/atomic_file.h"
 #include "tools/io/log_format.h"
 
 namespace fastslam::tools {
@@ -29,36 +32,61 @@ namespace fastslam::tools {
 // empty.
 class TraceWriter {
  public:
-  // Throws std::runtime_error "--trace PATH: cannot open for writing".
+  // Throws std::runtime_error "--trace PATH: ..." when PATH cannot be written (a directory,
+  // a device, a directory that does not exist).
   TraceWriter(const std::string& path, std::uint64_t every);
   // Counts a scan; true when this one gets a row.
   bool due() { return scans_++ % every_ == 0; }
   void row(double t, std::optional<double> pose_error, std::optional<double> map_error,
            std::size_t landmarks, std::size_t observed,
            const std::optional<ParticleDiagnostics>& particles);
-  // Throws std::runtime_error when the file could not be written.
+  // Puts the rows so far in place (also after an interrupted or failed run). Throws
+  // std::runtime_error when the file could not be written.
   void close();
 
  private:
-  std::string path_;
   std::uint64_t every_;
-  std::ofstream file_;
+  AtomicFile file_;
   std::uint64_t scans_ = 0;
 };
 
+// Every name `fastslam run` writes in its output directory. A run removes these (and their
+// temporaries) from the directory before it starts, never anything else, so a folder never
+// mixes two runs.
+inline constexpr const char* kRunFileNames[] = {
+    "metrics.json",       "trajectory.csv", "trajectory.tum",     "truth.csv", "gps.csv",
+    "dead_reckoning.csv", "landmarks.csv",  "true_landmarks.csv", "map.png"};
+
+// Checks `dir` before a run does any work: refuses (std::runtime_error "--out DIR: ...") a
+// path that is not a directory, cannot be created or written, is one of `inputs` or lies
+// inside one, or holds an input under one of `names`; creates it; removes the `names` (and
+// `.NAME.tmp-*` left by a killed run) that an earlier run left. Costs: one probe file, one
+// directory listing.
+void prepare_output_dir(const std::string& dir, std::span<const std::string> inputs,
+                        std::span<const char* const> names);
+
+// Refuses (std::runtime_error "OPTION PATH: ...") an output file `path` that is one of `inputs`
+// or, in `dir` (may be empty), one of the run's `names`.
+void check_output_file(const std::string& option, const std::string& path,
+                       std::span<const std::string> inputs, const std::string& dir,
+                       std::span<const char* const> names);
+
 // What a run writes at its end.
 struct RunFiles {
-  const nlohmann::json* metrics = nullptr;
+  nlohmann::json* metrics = nullptr;      // its "status" set to failed when a file fails
   std::span<const std::string> streamed;  // already in the directory, for the list
   std::span<const engine::MapLandmark> map;
   std::span<const TruthLandmark> true_landmarks;
   bool quiet = false;  // no list on stdout
 };
 
-// Creates `dir` and writes the files (true_landmarks.csv only when there are some); prints the
-// list of every file of the run unless `quiet`.
-// Throws std::runtime_error naming a file that cannot be written.
-void write_run_files(const std::string& dir, const RunFiles& files, std::FILE* out = stdout);
+// Writes landmarks.csv, true_landmarks.csv (when there are some) and, last, metrics.json into
+// `dir` (prepared by prepare_output_dir); prints the list of the run's files written unless
+// `quiet`. A file that cannot be written does not stop the others: its error is returned (one
+// message per file, empty when all were written) and, when metrics["status"] was "complete",
+// it becomes "failed: MESSAGE" in the metrics.json written after it.
+std::vector<std::string> write_run_files(const std::string& dir, const RunFiles& files,
+                                         std::FILE* out = stdout);
 
 // Runs `/usr/bin/python3 SCRIPT DIR`. The run's results stand whatever it does, so a failure
 // is a warning on stderr naming the command and its exit status.

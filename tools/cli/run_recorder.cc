@@ -2,63 +2,54 @@
 
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <stdexcept>
+#include <string_view>
 #include <utility>
 
 namespace fastslam::tools {
 
-// One output file of poses, buffered: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM.
+// One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, written to its
+// temporary as it comes and put in place by close().
 class RunRecorder::PoseFile {
  public:
   enum class Format { kCsv, kCsvPosition, kTum };
 
-  PoseFile(std::string path, Format format) : path_(std::move(path)), format_(format) {
-    file_.open(path_);
-    if (!file_) throw std::runtime_error("cannot write " + path_);
+  PoseFile(const std::string& path, Format format) : format_(format), file_(path) {
     switch (format_) {
       case Format::kCsv:
-        text_ = "t,x,y,theta\n";
+        file_.write("t,x,y,theta\n");
         break;
       case Format::kCsvPosition:
-        text_ = "t,x,y\n";
+        file_.write("t,x,y\n");
         break;
       case Format::kTum:
-        text_ = kTumHeader;
+        file_.write(kTumHeader);
         break;
     }
   }
 
+  // Throws std::runtime_error naming the file once a write has failed.
   void add(const StampedPose& p) {
     if (format_ == Format::kTum) {
-      append_tum(text_, p);
+      line_.clear();
+      append_tum(line_, p);
+      file_.write(line_);
     } else {
       char line[160];
       const int n = format_ == Format::kCsv
                         ? std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f,%.6f\n", p.time, p.x,
                                         p.y, p.theta)
                         : std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f\n", p.time, p.x, p.y);
-      text_.append(line, static_cast<std::size_t>(n));
+      file_.write(std::string_view(line, static_cast<std::size_t>(n)));
     }
-    if (text_.size() > (std::size_t{1} << 16)) flush();
   }
 
-  void close() {
-    flush();
-    file_.close();
-    if (!file_) throw std::runtime_error("write failed: " + path_);
-  }
+  void close() { file_.commit(); }
 
  private:
-  void flush() {
-    file_ << text_;
-    text_.clear();
-  }
-
-  std::string path_;
   Format format_;
-  std::ofstream file_;
-  std::string text_;
+  AtomicFile file_;
+  std::string line_;
 };
 
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
@@ -66,12 +57,11 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
     : reported_(reported),
       out_dir_(out_dir),
       dead_reckoning_(header.motion, header.start_pose, header.start_time),
-      filter_truth_({.reference_heading = true, .rpe_delta = rpe_delta}),
-      filter_gps_({.reference_heading = false, .rpe_delta = rpe_delta}),
-      dr_truth_({.reference_heading = true, .rpe_delta = rpe_delta}),
-      dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}) {
+      filter_truth_({.reference_heading = true, .rpe_delta = rpe_delta}, "pose error"),
+      filter_gps_({.reference_heading = false, .rpe_delta = rpe_delta}, "GPS error"),
+      dr_truth_({.reference_heading = true, .rpe_delta = rpe_delta}, "dead reckoning's pose error"),
+      dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}, "dead reckoning's GPS error") {
   if (!out_dir_.empty()) {
-    std::filesystem::create_directories(out_dir_);
     using F = PoseFile::Format;
     trajectory_csv_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv);
     trajectory_tum_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.tum", F::kTum);
@@ -79,15 +69,33 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
   // The start pose is scored (it is the estimate before the first control) but not written:
   // the files hold the poses after the controls.
   const StampedPose start = dead_reckoning_.pose();
-  filter_truth_.add_estimate(start);
-  filter_gps_.add_estimate(start);
+  filter_truth_.estimate(start);
+  filter_gps_.estimate(start);
   if (dead_reckoning_.available()) {
-    dr_truth_.add_estimate(start);
-    dr_gps_.add_estimate(start);
+    dr_truth_.estimate(start);
+    dr_gps_.estimate(start);
   }
 }
 
 RunRecorder::~RunRecorder() = default;
+
+void RunRecorder::Scored::estimate(const StampedPose& p) {
+  if (error) return;
+  try {
+    evaluator.add_estimate(p);
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+}
+
+void RunRecorder::Scored::reference(const StampedPose& p) {
+  if (error) return;
+  try {
+    evaluator.add_reference(p);
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+}
 
 RunRecorder::PoseFile& RunRecorder::file(std::unique_ptr<PoseFile>& slot, const char* name,
                                          bool position_only) {
@@ -103,15 +111,15 @@ void RunRecorder::control(const Event& e) {
   control_times_.push_back(e.time);
   dead_reckoning_.predict(e.control, e.dt, e.time);
   if (!dead_reckoning_.available()) return;
-  dr_truth_.add_estimate(dead_reckoning_.pose());
-  dr_gps_.add_estimate(dead_reckoning_.pose());
+  dr_truth_.estimate(dead_reckoning_.pose());
+  dr_gps_.estimate(dead_reckoning_.pose());
   if (!out_dir_.empty()) file(dr_csv_, "dead_reckoning.csv", false).add(dead_reckoning_.pose());
 }
 
 void RunRecorder::truth(const Event& e) {
   const StampedPose p{e.time, e.x, e.y, e.theta};
-  filter_truth_.add_reference(p);
-  if (dead_reckoning_.available()) dr_truth_.add_reference(p);
+  filter_truth_.reference(p);
+  if (dead_reckoning_.available()) dr_truth_.reference(p);
   last_truth_ = p;
   ++truth_poses_;
   if (!out_dir_.empty()) file(truth_csv_, "truth.csv", false).add(p);
@@ -119,8 +127,8 @@ void RunRecorder::truth(const Event& e) {
 
 void RunRecorder::gps(const Event& e) {
   const StampedPose p{e.time, e.x, e.y, 0.0};
-  filter_gps_.add_reference(p);
-  if (dead_reckoning_.available()) dr_gps_.add_reference(p);
+  filter_gps_.reference(p);
+  if (dead_reckoning_.available()) dr_gps_.reference(p);
   ++gps_fixes_;
   if (!out_dir_.empty()) file(gps_csv_, "gps.csv", true).add(p);
 }
@@ -136,8 +144,8 @@ void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
                         point.y + reported_.x * s + reported_.y * c, point.theta};
     control_times_.pop_front();
     ++first_pending_control_;
-    filter_truth_.add_estimate(p);
-    filter_gps_.add_estimate(p);
+    filter_truth_.estimate(p);
+    filter_gps_.estimate(p);
     if (trajectory_csv_) {
       trajectory_csv_->add(p);
       trajectory_tum_->add(p);
@@ -147,21 +155,38 @@ void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
 
 RecordedRun RunRecorder::finish() {
   RecordedRun r;
+  // Each file on its own: one that failed leaves the others whole.
   auto close = [&](std::unique_ptr<PoseFile>& f, const char* name) {
     if (!f) return;
-    f->close();
-    r.files.emplace_back(name);
+    try {
+      f->close();
+      r.files.emplace_back(name);
+    } catch (const std::exception& e) {
+      r.errors.emplace_back(e.what());
+    }
+    f.reset();
   };
   close(trajectory_csv_, "trajectory.csv");
   close(trajectory_tum_, "trajectory.tum");
   close(truth_csv_, "truth.csv");
   close(gps_csv_, "gps.csv");
   close(dr_csv_, "dead_reckoning.csv");
-  if (truth_poses_ > 0) r.filter.truth = filter_truth_.finish();
-  if (gps_fixes_ > 0) r.filter.gps = filter_gps_.finish();
+  auto score = [&](Scored& s, std::optional<TrajectoryMetrics>& into) {
+    if (s.error) {
+      r.warnings.push_back(std::string(s.name) + " not computed: " + *s.error);
+      return;
+    }
+    try {
+      into = s.evaluator.finish();
+    } catch (const std::exception& e) {
+      r.warnings.push_back(std::string(s.name) + " not computed: " + e.what());
+    }
+  };
+  if (truth_poses_ > 0) score(filter_truth_, r.filter.truth);
+  if (gps_fixes_ > 0) score(filter_gps_, r.filter.gps);
   if (dead_reckoning_.available()) {
-    if (truth_poses_ > 0) r.dead_reckoning.truth = dr_truth_.finish();
-    if (gps_fixes_ > 0) r.dead_reckoning.gps = dr_gps_.finish();
+    if (truth_poses_ > 0) score(dr_truth_, r.dead_reckoning.truth);
+    if (gps_fixes_ > 0) score(dr_gps_, r.dead_reckoning.gps);
   }
   r.last_truth = last_truth_;
   r.truth_poses = truth_poses_;

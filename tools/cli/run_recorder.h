@@ -1,7 +1,8 @@
 // What a run records while it goes, in memory bounded by the gaps between scans rather than by
 // the run's length: the estimated trajectory (the pose after every control, at the source's
 // reported point), the truth poses and GPS fixes, and the dead-reckoning baseline of the same
-// controls, each written to its file in the output directory as it arrives and fed to the
+// controls, each written to its file in the output directory as it arrives (to a temporary put
+// in place at the end, tools/io/atomic_file.h) and fed to the
 // streaming trajectory evaluation (tools/eval/trajectory_metrics.h) against the truth and
 // against GPS.
 //
@@ -12,7 +13,6 @@
 
 #include <cstdint>
 #include <deque>
-#include <fstream>
 #include <memory>
 #include <optional>
 #include <span>
@@ -22,6 +22,7 @@
 #include "engine/filter.h"
 #include "tools/eval/dead_reckoning.h"
 #include "tools/eval/trajectory_metrics.h"
+#include "tools/io/atomic_file.h"
 #include "tools/io/log_format.h"
 #include "tools/io/tum.h"
 
@@ -38,7 +39,11 @@ struct RecordedRun {
   TrajectoryScores dead_reckoning;  // both empty when the model ignores the controls
   std::optional<StampedPose> last_truth;
   std::uint64_t truth_poses = 0, gps_fixes = 0;
-  std::vector<std::string> files;  // written, in order
+  std::vector<std::string> files;   // written, in order
+  std::vector<std::string> errors;  // one message per file that could not be written
+  // Scores given up on (a reference out of time order, a pose not finite): the files and the
+  // other scores stand.
+  std::vector<std::string> warnings;
 };
 
 class RunRecorder {
@@ -57,7 +62,8 @@ class RunRecorder {
   // The filter's poses after the controls since the last batch (Filter::take_trajectory).
   void estimates(std::span<const engine::TrajectoryPoint> points);
 
-  // Closes the files (throws std::runtime_error naming one that failed) and scores.
+  // Puts the files in place (one that fails is left out, its message in `errors`) and scores.
+  // Call it also after a failed or interrupted run: the files then hold the poses so far.
   RecordedRun finish();
 
  private:
@@ -68,7 +74,18 @@ class RunRecorder {
   engine::SensorOffset reported_;
   std::string out_dir_;
   DeadReckoning dead_reckoning_;
-  TrajectoryEvaluator filter_truth_, filter_gps_, dr_truth_, dr_gps_;
+  // An evaluator that, once it refuses an input, is dropped with its message.
+  struct Scored {
+    Scored(const TrajectoryEvaluatorOptions& options, const char* what)
+        : evaluator(options), name(what) {}
+    void estimate(const StampedPose& p);
+    void reference(const StampedPose& p);
+    TrajectoryEvaluator evaluator;
+    const char* name;
+    std::optional<std::string> error;
+  };
+
+  Scored filter_truth_, filter_gps_, dr_truth_, dr_gps_;
   std::deque<double> control_times_;  // of controls not yet in an estimate batch
   std::uint64_t first_pending_control_ = 0;
   std::unique_ptr<PoseFile> trajectory_csv_, trajectory_tum_, truth_csv_, gps_csv_, dr_csv_;

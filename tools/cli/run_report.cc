@@ -105,6 +105,8 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
   for (const auto& [key, value] : s.info.metrics) m[key] = value;
   if (s.association.discard_unlabelled) m["unlabelled_discarded"] = r.unlabelled_discarded;
   if (r.input_error) m["input_error"] = *r.input_error;
+  m["status"] = run_status(r);
+  m["warnings"] = r.warnings;
   const RecordedRun& t = r.trajectories;
   m["rpe_delta_m"] = *s.options.rpe_delta;
   if (t.filter.truth) {
@@ -160,6 +162,13 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
     m["landmarks_removed"] = st.landmarks_removed;
   }
   return m;
+}
+
+std::string run_status(const RunResult& r) {
+  if (r.failure) return "failed: " + *r.failure;
+  if (r.input_error) return "failed: " + *r.input_error;
+  if (r.interrupted_by != 0) return "interrupted";
+  return "complete";
 }
 
 void print_summary(const RunSettings& s, const RunResult& r, std::FILE* out) {

@@ -12,6 +12,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json_fwd.hpp>
 
@@ -43,12 +44,18 @@ struct RunResult {
   engine::Estimate estimate;
   engine::FilterStatistics stats;
   RecordedRun trajectories;
-  std::optional<MapScores> map;          // when the source has true landmarks
-  double open_seconds = 0.0;             // opening the source: reading and parsing a recorded one
-  double source_seconds = 0.0;           // its events after that (for a simulator: simulating)
-  double filter_seconds = 0.0;           // the filter, trace rows excluded
-  std::string ended_by = "end of data";  // or "--max-steps", "--max-seconds", "input error"
+  std::optional<MapScores> map;  // when the source has true landmarks
+  double open_seconds = 0.0;     // opening the source: reading and parsing a recorded one
+  double source_seconds = 0.0;   // its events after that (for a simulator: simulating)
+  double filter_seconds = 0.0;   // the filter, trace rows excluded
+  // Or "--max-steps", "--max-seconds", "input error", "error", "SIGINT", "SIGTERM".
+  std::string ended_by = "end of data";
   std::optional<std::string> input_error;  // the source's message, when it ended the run
+  std::optional<std::string> failure;      // what else ended it: the filter, a file
+  int interrupted_by = 0;                  // the signal that ended it
+  // Evaluation problems (truth that cannot score the estimate): reported, never fatal.
+  std::vector<std::string> warnings;
+  bool unknown_id_seen = false;  // a scan's landmark id the truth lacks was warned of
   std::uint64_t unlabelled_discarded = 0;
 };
 
@@ -63,6 +70,9 @@ struct RunSettings {
 // True when the filter's error against the run's reference (truth, else GPS) exceeds dead
 // reckoning's: it did worse than ignoring every observation.
 bool worse_than_dead_reckoning(const RunResult& r);
+
+// "complete", "interrupted" or "failed: REASON": how the run ended, metrics.json's "status".
+std::string run_status(const RunResult& r);
 
 nlohmann::json metrics_json(const RunSettings& s, const RunResult& r);
 

@@ -4,15 +4,17 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <map>
+#include <ostream>
 #include <set>
 #include <stdexcept>
 
 #include <nlohmann/json.hpp>
 
+#include "tools/cli/interrupt.h"
+#include "tools/cli/run_output.h"
 #include "tools/cli/run_provenance.h"
+#include "tools/io/atomic_file.h"
 
 namespace fastslam::tools {
 namespace {
@@ -113,6 +115,9 @@ nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed) {
 int run_sweep(const RunOptions& options) {
   const std::vector<std::uint64_t>& seeds = options.seeds;
   if (seeds.empty()) throw std::invalid_argument("--seeds: no seed given");
+  constexpr const char* kSweepFiles[] = {"sweep.json", "sweep.csv"};
+  if (!options.out.empty()) prepare_output_dir(options.out, run_inputs(options), kSweepFiles);
+  const InterruptHandlers handlers;
   // The provenance once for the sweep, not per seed: the inputs hashed once, the build and the
   // options (the first seed's, with the sweep's seeds and output directory) taken off each run.
   nlohmann::json provenance = {{"inputs", input_files_json(options)}};
@@ -126,12 +131,16 @@ int run_sweep(const RunOptions& options) {
     std::fflush(stdout);
     per_seed.push_back(run_once(o));
     nlohmann::json& m = per_seed.back();
+    const bool interrupted = m["status"] == "interrupted";
     m["seed"] = seed;
     for (const char* key : {"schema_version", "build", "options"}) {
       if (!provenance.contains(key)) provenance[key] = m[key];
       m.erase(key);
     }
+    // The seeds run so far are summarised; the rest are not started.
+    if (interrupted) break;
   }
+  const int signal = interrupt_signal();
   provenance["options"]["seed"] = nullptr;
   provenance["options"]["seeds"] = seeds;
   provenance["options"]["out"] = options.out;
@@ -143,16 +152,15 @@ int run_sweep(const RunOptions& options) {
     std::printf("  %-28s %10.3f / %10.3f / %10.3f / %8.3f\n", key, s["mean"].get<double>(),
                 s["median"].get<double>(), s["max"].get<double>(), s["stdev"].get<double>());
   }
-  if (options.out.empty()) return 0;
-  std::filesystem::create_directories(options.out);
+  const int code = signal != 0 ? 128 + signal : 0;
+  if (options.out.empty()) return code;
   {
-    std::ofstream json(options.out + "/sweep.json");
     nlohmann::json sweep = std::move(provenance);
     sweep["seeds"] = seeds;
+    sweep["status"] = signal != 0 ? "interrupted" : "complete";
     sweep["summary"] = summary;
     sweep["per_seed"] = per_seed;
-    json << sweep.dump(2) << '\n';
-    if (!json) throw std::runtime_error("cannot write " + options.out + "/sweep.json");
+    write_file_atomically(options.out + "/sweep.json", sweep.dump(2) + '\n');
   }
   std::set<std::string> columns;
   std::vector<std::map<std::string, nlohmann::json>> rows(per_seed.size());
@@ -160,7 +168,8 @@ int run_sweep(const RunOptions& options) {
     flatten(per_seed[i], "", rows[i]);
     for (const auto& [key, value] : rows[i]) columns.insert(key);
   }
-  std::ofstream csv(options.out + "/sweep.csv");
+  AtomicFile file(options.out + "/sweep.csv");
+  std::ostream& csv = file.stream();
   bool first = true;
   for (const std::string& c : columns) csv << (first ? "" : ",") << c, first = false;
   csv << '\n';
@@ -174,10 +183,9 @@ int run_sweep(const RunOptions& options) {
     }
     csv << '\n';
   }
-  csv.close();
-  if (!csv) throw std::runtime_error("cannot write " + options.out + "/sweep.csv");
+  file.commit();
   std::printf("  wrote %s/{sweep.json,sweep.csv,seed-*/}\n", options.out.c_str());
-  return 0;
+  return code;
 }
 
 }  // namespace fastslam::tools

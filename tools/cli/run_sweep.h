@@ -3,6 +3,8 @@
 // then every numeric metric is summarised over the seeds (mean, median, min, max, standard
 // deviation; booleans as the number of seeds where true) into OUT/sweep.json, with every seed's
 // metrics, and OUT/sweep.csv (a row per seed); a table of the headline errors goes to stdout.
+// SIGINT or SIGTERM end the seed running (its results written, tools/cli/interrupt.h) and the
+// sweep: the seeds so far are summarised, sweep.json says "status": "interrupted".
 // sweep.json carries the provenance (tools/cli/run_provenance.h) once, at its top: the
 // inputs hashed once, the build, the options with every seed; the seeds' entries leave it out.
 //
@@ -29,7 +31,8 @@ std::vector<std::uint64_t> parse_seeds(const std::string& text);
 // for every number (nested objects as "outer.inner"), {key: {true: count}} for booleans.
 nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed);
 
-// Runs `options` once per seed of options.seeds; returns the process exit code.
+// Runs `options` once per seed of options.seeds; returns the process exit code (128 + the
+// signal when interrupted).
 int run_sweep(const RunOptions& options);
 
 }  // namespace fastslam::tools

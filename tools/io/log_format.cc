@@ -17,6 +17,7 @@
 
 #include "engine/enum_names.h"
 #include "engine/motion_dispatch.h"
+#include "tools/io/atomic_file.h"
 
 namespace fastslam::tools {
 
@@ -256,7 +257,8 @@ class LogReader::Parser {
       if (text_.size() == kMaxLogLineBytes) {
         fail("line longer than " + std::to_string(kMaxLogLineBytes) +
              " bytes (the format's limit, docs/log-format.md): not a fastslam log, or a scan "
-             "of more than " + std::to_string(kMaxScanObservations) + " observations");
+             "of more than " +
+             std::to_string(kMaxScanObservations) + " observations");
       }
       text_.push_back(static_cast<char>(c));
     }
@@ -567,10 +569,7 @@ void write_log(const std::string& path, const Log& log) {
   // Format into memory first so a log that would not read back leaves no file behind.
   std::ostringstream text;
   write_log(text, log);
-  std::ofstream out(path);
-  if (!out) throw std::runtime_error(path + ": cannot open for writing");
-  out << text.view();
-  if (!out) throw std::runtime_error(path + ": write failed");
+  write_file_atomically(path, text.view());
 }
 
 }  // namespace fastslam::tools

@@ -117,9 +117,10 @@ Log read_log(const std::string& path);
 // The same from a stream; `name` stands for the file in messages.
 Log read_log(std::istream& in, const std::string& name);
 
-// Writes `log` to `path` (throws std::runtime_error when the file cannot be written) or to a
-// stream. Throws std::invalid_argument (writing nothing to a path) when the log would not read
-// back: events out of time order, a scan's observations out of bounds, a non-finite value.
+// Writes `log` to `path` (whole or not at all: tools/io/atomic_file.h; throws
+// std::runtime_error when the file cannot be written) or to a stream. Throws
+// std::invalid_argument (writing nothing to a path) when the log would not read back: events
+// out of time order, a scan's observations out of bounds, a non-finite value.
 void write_log(const std::string& path, const Log& log);
 void write_log(std::ostream& out, const Log& log);
 

@@ -216,7 +216,14 @@ def main():
                   markerscale=12)
     fig.tight_layout()
     path = os.path.join(out, "map.png")
-    fig.savefig(path, bbox_inches="tight")
+    # Whole or not at all, as the run's other files (tools/io/atomic_file.h).
+    temp = os.path.join(out, ".map.png.tmp-%d" % os.getpid())
+    try:
+        fig.savefig(temp, bbox_inches="tight", format="png")
+        os.replace(temp, path)
+    finally:
+        if os.path.exists(temp):
+            os.remove(temp)
     print("wrote", path)
 
 

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "parallel/random_stream.h"
+#include "tools/io/atomic_file.h"
 
 namespace fastslam::tools {
 namespace {
@@ -139,17 +140,17 @@ std::vector<LgSlamRow> run_lg_slam_experiment(const LgSlamExperimentOptions& opt
 }
 
 void write_lg_slam_csv(const std::string& path, std::span<const LgSlamRow> rows) {
-  std::FILE* file = std::fopen(path.c_str(), "w");
-  if (file == nullptr) throw std::runtime_error(path + ": cannot open for writing");
-  bool ok = std::fputs("step,seed,variant,landmark_error,pose_error\n", file) >= 0;
+  AtomicFile file(path);
+  file.write("step,seed,variant,landmark_error,pose_error\n");
+  char line[160];
   for (const LgSlamRow& row : rows) {
-    if (!ok) break;
-    ok = std::fprintf(file, "%llu,%llu,%s,%.9g,%.9g\n", static_cast<unsigned long long>(row.step),
-                      static_cast<unsigned long long>(row.seed), to_string(row.variant).data(),
-                      row.landmark_error, row.pose_error) > 0;
+    std::snprintf(line, sizeof(line), "%llu,%llu,%s,%.9g,%.9g\n",
+                  static_cast<unsigned long long>(row.step),
+                  static_cast<unsigned long long>(row.seed), to_string(row.variant).data(),
+                  row.landmark_error, row.pose_error);
+    file.write(line);
   }
-  ok = std::fclose(file) == 0 && ok;
-  if (!ok) throw std::runtime_error(path + ": write failed");
+  file.commit();
 }
 
 int run_lg_slam_command(const LgSlamExperimentOptions& options) {

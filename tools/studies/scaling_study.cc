@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/filter.h"
+#include "tools/io/atomic_file.h"
 #include "tools/sim/simulator.h"
 #include "tools/sim/world.h"
 #include "tools/studies/linear_baseline.h"
@@ -319,8 +320,7 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
           {"spacing_m", options.spacing},
           {"study_wall_seconds", wall}}},
         {"points", points}};
-    std::ofstream file(json_path);
-    if (!(file << out.dump(2) << '\n')) throw std::runtime_error("cannot write " + json_path);
+    write_file_atomically(json_path, out.dump(2) + '\n');
   }
   return 0;
 }
