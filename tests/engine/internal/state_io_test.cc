@@ -4,14 +4,17 @@
 #include "engine/internal/state_io.h"
 
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include <gtest/gtest.h>
 
+#include "engine/filter.h"
 #include "engine/internal/map_update.h"
 
 namespace fastslam::engine::internal {
@@ -250,6 +253,25 @@ TEST(StateIoTest, FieldsBreakingTheEnginesInvariantsAreRefusedByName) {
     ADD_FAILURE() << "a FastSLAM 1.0 state with a pose covariance loaded";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("pose covariance"), std::string::npos) << e.what();
+  }
+}
+
+// Inputs the load fuzzer found (fuzz/regressions/filter_load_fuzzer/): each is refused by name.
+TEST(StateIoTest, FuzzerFindingsAreRefusedByName) {
+  const std::string dir = FASTSLAM_FUZZ_REGRESSIONS "/filter_load_fuzzer/";
+  const std::pair<const char*, const char*> cases[] = {
+      {"nan_after_scan.state", "pose covariance of particle 0: entry 9 outside the block"},
+  };
+  for (const auto& [file, needle] : cases) {
+    SCOPED_TRACE(file);
+    std::ifstream in(dir + file, std::ios::binary);
+    ASSERT_TRUE(in) << dir + file;
+    try {
+      (void)Filter::load(in);
+      ADD_FAILURE() << "loaded";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
   }
 }
 
