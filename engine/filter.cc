@@ -262,6 +262,8 @@ FilterStatistics Filter::statistics() const {
   st.observations = c.observations;
   st.resamples = c.resamples;
   st.weight_resets = c.weight_resets;
+  st.landmarks_created = c.landmarks_created;
+  st.landmarks_removed = c.landmarks_removed;
   s.phase_times.combine_each([&](const internal::PhaseTimes& t) {
     st.predict_seconds += t.predict;
     st.associate_seconds += t.associate;

@@ -61,7 +61,7 @@ struct MapLandmark {
 
 // What became of one observation of a scan in one particle (ObservationAssociation).
 enum class AssociationOutcome : std::uint8_t {
-  kAssociated,   // updated an existing landmark
+  kAssociated,  // updated an existing landmark
   kNew,         // started a landmark
   // Left out of the map: EkfSlam's observations between its two gates (EkfConfig). FastSLAM
   // never discards one: an observation no landmark explains better than p0 starts a landmark.
@@ -140,15 +140,15 @@ struct FilterStatistics {
   double update_seconds = 0.0;     // landmark updates, negative information, new landmarks
   double resample_seconds = 0.0;
   double observe_wall_seconds = 0.0;
-  // Unknown association, summed over particles since construction (or load): landmarks
-  // started by observations, and removed by negative information.
+  // Unknown association, summed over particles since construction (a loaded filter continues the
+  // saved counts): landmarks started by observations, and removed by negative information.
   std::uint64_t landmarks_created = 0;
   std::uint64_t landmarks_removed = 0;
   // ln p(z_1..t | u_1..t), the filter's estimate of the data's likelihood under its models: the
   // sum over scans of ln sum_i w_i l_i (w the normalised weights before the scan, l_i particle
   // i's weight factor; new landmarks count ln p0). Compares settings (noises, a sensor offset)
   // on the same data without ground truth. -inf after a scan every particle found impossible.
-  // Since construction (or load).
+  // Since construction, across save and load.
   double log_evidence = 0.0;
   // The node heap: live tree nodes and bytes of all maps together.
   std::int64_t live_nodes = 0;

@@ -36,6 +36,9 @@ struct FilterCounters {
   std::uint64_t controls = 0, scans = 0, observations = 0, resamples = 0, weight_resets = 0;
   double resample_seconds = 0.0;
   double log_evidence = 0.0;
+  // Landmarks started and removed before the state was loaded (the per-thread counts in
+  // PhaseTimes hold those since).
+  std::uint64_t landmarks_created = 0, landmarks_removed = 0;
   double observe_wall_seconds = 0.0;
 };
 
@@ -63,9 +66,9 @@ struct FilterState {
   // The clock (Estimate::time): the data's time; `timed` once a time was given.
   double time = 0.0;
   bool timed = false;
-  ScanRecords records;  // the scan being processed, per particle
+  ScanRecords records;                               // the scan being processed, per particle
   std::vector<ObservationAssociation> associations;  // the last scan's report
-  mutable tbb::combinable<PhaseTimes> phase_times;  // combine_each is not const
+  mutable tbb::combinable<PhaseTimes> phase_times;   // combine_each is not const
 };
 
 }  // namespace fastslam::engine::internal

@@ -20,7 +20,7 @@ namespace fastslam::engine::internal {
 namespace {
 
 constexpr char kMagic[8] = {'F', 'S', 'L', 'A', 'M', 'S', 'T', '1'};
-constexpr std::uint32_t kVersion = 3;  // 3: the clock and the last scan's report
+constexpr std::uint32_t kVersion = 4;  // 4: the evidence and the landmarks created and removed
 constexpr std::uint64_t kLimit = std::uint64_t{1} << 34;
 
 [[noreturn]] void corrupt(const std::string& what) {
@@ -108,13 +108,13 @@ std::vector<ObservationAssociation> get_report(std::istream& in) {
   report.reserve(entries.size());
   for (std::size_t j = 0; j < entries.size(); ++j) {
     const SavedAssociation& e = entries[j];
-    if (e.observation != j || e.outcome > static_cast<std::uint8_t>(AssociationOutcome::kDiscarded) ||
-        e.zero[0] != 0 || e.zero[1] != 0 || e.zero[2] != 0 || std::isnan(e.mahalanobis2) ||
-        e.mahalanobis2 < 0) {
+    if (e.observation != j ||
+        e.outcome > static_cast<std::uint8_t>(AssociationOutcome::kDiscarded) || e.zero[0] != 0 ||
+        e.zero[1] != 0 || e.zero[2] != 0 || std::isnan(e.mahalanobis2) || e.mahalanobis2 < 0) {
       corrupt("scan report");
     }
-    report.push_back({e.observation, static_cast<AssociationOutcome>(e.outcome), e.landmark_id,
-                      e.mahalanobis2});
+    report.push_back(
+        {e.observation, static_cast<AssociationOutcome>(e.outcome), e.landmark_id, e.mahalanobis2});
   }
   return report;
 }
@@ -201,16 +201,16 @@ void get_columns(std::istream& in, memory::ParticleStore& store) {
 void check_landmark(const memory::Landmark& lm, memory::Slot slot, std::size_t particle,
                     std::uint64_t step, const std::vector<std::int64_t>& known_ids) {
   auto where = [&] {
-    return "landmark in slot " + std::to_string(slot) + " of particle " +
-           std::to_string(particle) + ": ";
+    return "landmark in slot " + std::to_string(slot) + " of particle " + std::to_string(particle) +
+           ": ";
   };
   if (!std::isfinite(lm.x) || !std::isfinite(lm.y) || std::abs(lm.x) > 1e150 ||
       std::abs(lm.y) > 1e150) {
     corrupt(where() + "position");
   }
   const double det = lm.sxx * lm.syy - lm.sxy * lm.sxy;
-  if (!std::isfinite(lm.sxx) || !std::isfinite(lm.sxy) || !std::isfinite(lm.syy) ||
-      !(lm.sxx > 0) || !(det > 0) || !std::isfinite(det)) {
+  if (!std::isfinite(lm.sxx) || !std::isfinite(lm.sxy) || !std::isfinite(lm.syy) || !(lm.sxx > 0) ||
+      !(det > 0) || !std::isfinite(det)) {
     corrupt(where() + "covariance not positive definite");
   }
   if (!std::isfinite(lm.log_odds)) corrupt(where() + "log-odds");
@@ -248,9 +248,8 @@ void get_map(std::istream& in, bool known_association, const std::vector<std::in
 // motion state's dimension) must be symmetric and positive semi-definite, the rest of the slot
 // zero. The eigenvalues may fall below zero by rounding only (relative to the largest).
 void check_pose_covariances(const MotionConfig& motion, const std::vector<double>& values) {
-  const int n = visit_motion(motion, [](const auto& model) {
-    return std::remove_cvref_t<decltype(model)>::kStateDim;
-  });
+  const int n = visit_motion(
+      motion, [](const auto& model) { return std::remove_cvref_t<decltype(model)>::kStateDim; });
   constexpr std::size_t kSlot = PoseCovariances::kSlot;
   for (std::size_t i = 0; i * kSlot < values.size(); ++i) {
     const double* p = &values[i * kSlot];
@@ -285,10 +284,16 @@ void save_state(const FilterState& s, const std::vector<TrajectoryPoint>& trajec
 #endif
   put(out, config);
   const FilterCounters& c = s.counters;
-  for (std::uint64_t v :
-       {c.step, c.controls, c.scans, c.observations, c.resamples, c.weight_resets}) {
+  std::uint64_t created = c.landmarks_created, removed = c.landmarks_removed;
+  s.phase_times.combine_each([&](const PhaseTimes& t) {
+    created += t.created;
+    removed += t.removed;
+  });
+  for (std::uint64_t v : {c.step, c.controls, c.scans, c.observations, c.resamples, c.weight_resets,
+                          created, removed}) {
     put(out, v);
   }
+  put(out, c.log_evidence);
   put(out, s.landmark_variance_bound);
   put(out, s.time);
   put<std::uint8_t>(out, s.timed ? 1 : 0);
@@ -331,10 +336,11 @@ StateHeader read_header(std::istream& in) {
   StateHeader h;
   h.config = get_config(in);
   FilterCounters& c = h.counters;
-  for (std::uint64_t* v :
-       {&c.step, &c.controls, &c.scans, &c.observations, &c.resamples, &c.weight_resets}) {
+  for (std::uint64_t* v : {&c.step, &c.controls, &c.scans, &c.observations, &c.resamples,
+                           &c.weight_resets, &c.landmarks_created, &c.landmarks_removed}) {
     *v = get<std::uint64_t>(in);
   }
+  c.log_evidence = get<double>(in);
   // The random streams are keyed by step < 2^56 (parallel/random_stream.h); every step is a
   // control or a scan, and a scan resamples or resets the weights at most once.
   if (c.step >= std::uint64_t{1} << 56) corrupt("step counter");
@@ -343,6 +349,19 @@ StateHeader read_header(std::istream& in) {
   }
   if (c.resamples > c.scans || c.weight_resets > c.scans) {
     corrupt("counters: more resamples or weight resets than scans");
+  }
+  // Every observation starts at most one landmark per particle, and only a started one can be
+  // removed.
+  std::uint64_t most = 0;
+  if (__builtin_mul_overflow(c.observations, std::uint64_t{h.config.particles}, &most)) {
+    most = std::numeric_limits<std::uint64_t>::max();
+  }
+  if (c.landmarks_created > most || c.landmarks_removed > c.landmarks_created) {
+    corrupt("counters: more landmarks created than observations, or removed than created");
+  }
+  // A sum of logs of probabilities' sums: finite, or -inf once a scan was impossible.
+  if (std::isnan(c.log_evidence) || c.log_evidence == std::numeric_limits<double>::infinity()) {
+    corrupt("log evidence");
   }
   h.variance_bound = get<double>(in);
   if (!std::isfinite(h.variance_bound) || h.variance_bound < 0) corrupt("variance bound");

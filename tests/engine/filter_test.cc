@@ -9,8 +9,8 @@
 #include <cstring>
 #include <functional>
 #include <iostream>
-#include <map>
 #include <limits>
+#include <map>
 #include <memory>
 #include <numbers>
 #include <random>
@@ -554,40 +554,53 @@ TEST_P(FilterAlgorithmTest, SaveLoadContinuesBitIdentically) {
   FilterConfig config = base_config(GetParam(), 64);
   config.threads = 2;
   config.record_trajectory = true;
-  // Cut once after a scan (empty queue) and once after controls (queued controls are saved).
-  for (const bool after_control : {false, true}) {
-    SCOPED_TRACE(after_control ? "queue not empty" : "queue empty");
-    std::size_t cut = s.events.size() / 3;
-    while (s.events[cut - 1].is_scan == after_control) ++cut;
-    Filter original(config);
-    feed(original, s.events, 0, cut);
-    const std::string bytes = saved(original);
-    std::unique_ptr<Filter> copy = loaded(bytes);
-    EXPECT_EQ(copy->config().particles, config.particles);
-    EXPECT_EQ(copy->config().algorithm, config.algorithm);
-    EXPECT_EQ(copy->config().seed, config.seed);
-    EXPECT_EQ(copy->statistics().controls, original.statistics().controls);
-    EXPECT_EQ(copy->statistics().scans, original.statistics().scans);
-    EXPECT_EQ(copy->statistics().resamples, original.statistics().resamples);
-    // Saving the restored filter writes the same bytes.
-    EXPECT_TRUE(saved(*copy) == bytes);
-    feed(original, s.events, cut, s.events.size());
-    feed(*copy, s.events, cut, s.events.size());
-    EXPECT_TRUE(identical(snapshot(*copy), snapshot(original)));
-    EXPECT_TRUE(identical(copy->estimate(), original.estimate()));
-    EXPECT_TRUE(identical(copy->take_trajectory(), original.take_trajectory()));
-    EXPECT_EQ(copy->statistics().observations, original.statistics().observations);
-    EXPECT_EQ(copy->statistics().resamples, original.statistics().resamples);
-  }
+  // Cut once after a scan (empty queue) and once after controls (queued controls are saved);
+  // with known ids and with unknown association (the landmarks created and removed).
+  for (const bool after_control : {false, true})
+    for (const Association association : {Association::kKnown, Association::kMaximumLikelihood}) {
+      SCOPED_TRACE(after_control ? "queue not empty" : "queue empty");
+      SCOPED_TRACE(to_string(association));
+      config.association = association;
+      std::size_t cut = s.events.size() / 3;
+      while (s.events[cut - 1].is_scan == after_control) ++cut;
+      Filter original(config);
+      feed(original, s.events, 0, cut);
+      const std::string bytes = saved(original);
+      std::unique_ptr<Filter> copy = loaded(bytes);
+      EXPECT_EQ(copy->config().particles, config.particles);
+      EXPECT_EQ(copy->config().algorithm, config.algorithm);
+      EXPECT_EQ(copy->config().seed, config.seed);
+      EXPECT_EQ(copy->statistics().controls, original.statistics().controls);
+      EXPECT_EQ(copy->statistics().scans, original.statistics().scans);
+      EXPECT_EQ(copy->statistics().resamples, original.statistics().resamples);
+      // Saving the restored filter writes the same bytes.
+      EXPECT_TRUE(saved(*copy) == bytes);
+      feed(original, s.events, cut, s.events.size());
+      feed(*copy, s.events, cut, s.events.size());
+      EXPECT_TRUE(identical(snapshot(*copy), snapshot(original)));
+      EXPECT_TRUE(identical(copy->estimate(), original.estimate()));
+      EXPECT_TRUE(identical(copy->take_trajectory(), original.take_trajectory()));
+      // The counters and the evidence go on as if the filter had never been saved.
+      const FilterStatistics a = copy->statistics(), b = original.statistics();
+      EXPECT_EQ(a.observations, b.observations);
+      EXPECT_EQ(a.resamples, b.resamples);
+      EXPECT_EQ(a.landmarks_created, b.landmarks_created);
+      EXPECT_EQ(a.landmarks_removed, b.landmarks_removed);
+      if (association != Association::kKnown) {
+        EXPECT_GT(b.landmarks_created, 0u);
+      }
+      EXPECT_TRUE(same_bits(a.log_evidence, b.log_evidence));
+    }
 }
 
 // Offsets in the saved format (engine/internal/state_io.h): magic, version, sizeof(FilterConfig),
-// config, six counters, the landmark variance bound, the clock (time, flag), then
-// length-prefixed vectors (the last scan's report of 24-byte entries, queued controls,
+// config, eight counters, the log evidence, the landmark variance bound, the clock (time, flag),
+// then length-prefixed vectors (the last scan's report of 24-byte entries, queued controls,
 // trajectory, known ids, pose covariances), the six columns and the maps.
 constexpr std::size_t kConfigAt = 8 + 4 + 8;
 constexpr std::size_t kCountersAt = kConfigAt + sizeof(FilterConfig);
-constexpr std::size_t kClockAt = kCountersAt + 6 * 8 + 8;
+constexpr std::size_t kEvidenceAt = kCountersAt + 8 * 8;
+constexpr std::size_t kClockAt = kEvidenceAt + 8 + 8;
 constexpr std::size_t kReportAt = kClockAt + 8 + 1;
 
 template <class T>
@@ -629,8 +642,23 @@ TEST(FilterSaveTest, LoadRefusesCorruptAndTruncatedStreams) {
   }
   {
     std::string b = good;
-    poke<double>(b, kCountersAt + 6 * 8, kNaN);
+    poke<double>(b, kEvidenceAt + 8, kNaN);
     refused(b, "variance bound");
+  }
+  for (const double evidence : {kNaN, kInf}) {
+    std::string b = good;
+    poke<double>(b, kEvidenceAt, evidence);
+    refused(b, "log evidence");
+  }
+  {  // -inf is what a scan every particle found impossible leaves.
+    std::string b = good;
+    poke<double>(b, kEvidenceAt, -kInf);
+    EXPECT_TRUE(std::isinf(loaded(b)->statistics().log_evidence));
+  }
+  {  // Counters 6 and 7: landmarks created and removed.
+    std::string b = good;
+    poke<std::uint64_t>(b, kCountersAt + 7 * 8, 1);
+    refused(b, "removed than created");
   }
   {
     std::string b = good;
@@ -1285,15 +1313,18 @@ TEST(FilterClockTest, TimesSetTheClockAndMayNotGoBackwards) {
   filter.observe({});         // untimed scans leave the clock
   EXPECT_EQ(filter.estimate().time, -99.5);
   const std::string before = saved(filter);
-  expect_throw_with<std::invalid_argument>(
-      [&] { filter.predict(s.events[0].control, 0.1, -99.6); }, "time goes backwards");
+  expect_throw_with<std::invalid_argument>([&] { filter.predict(s.events[0].control, 0.1, -99.6); },
+                                           "time goes backwards");
   expect_throw_with<std::invalid_argument>([&] { filter.observe({}, -200.0); },
                                            "time goes backwards");
   expect_throw_with<std::invalid_argument>([&] { filter.observe({}, kNaN); }, "finite");
   expect_throw_with<std::invalid_argument>([&] { filter.predict({}, 0.1, kInf); }, "finite");
   // A bad control with a good time: refused, and the clock is not moved.
-  expect_throw_with<std::invalid_argument>([&] { filter.predict({kNaN, 0.0}, 0.1, 5.0); },
-                                           "finite");
+  expect_throw_with<std::invalid_argument>(
+      [&] {
+        filter.predict({kNaN, 0.0}, 0.1, 5.0);
+      },
+      "finite");
   EXPECT_TRUE(saved(filter) == before) << "a refused call changed the state";
   filter.observe({}, 7.0);
   EXPECT_EQ(filter.estimate().time, 7.0);
@@ -1325,14 +1356,16 @@ TEST(FilterBatchPredictTest, EqualsOneCallPerControlAndRefusesAllOrNothing) {
         times.push_back(t);
         continue;
       }
-      batch.predict(controls, dts, timed ? std::span<const double>(times) : std::span<const double>());
+      batch.predict(controls, dts,
+                    timed ? std::span<const double>(times) : std::span<const double>());
       controls.clear();
       dts.clear();
       times.clear();
       one.observe(e.scan);
       batch.observe(e.scan);
     }
-    batch.predict(controls, dts, timed ? std::span<const double>(times) : std::span<const double>());
+    batch.predict(controls, dts,
+                  timed ? std::span<const double>(times) : std::span<const double>());
     ASSERT_TRUE(saved(one) == saved(batch)) << (timed ? "timed" : "untimed");
     // A bad control in the middle, a time going backwards, unequal lengths: nothing queued.
     const std::string before = saved(batch);
@@ -1406,10 +1439,9 @@ TEST_P(FilterAlgorithmTest, AssociationsAreTheMostLikelyParticlesKnownIdsAndDist
       }
       ASSERT_EQ(got[j].outcome, AssociationOutcome::kAssociated);
       const LandmarkGaussian lm = to_gaussian(it->second);
-      const double want =
-          evaluate_observation(sensor, lm, Pose(pose[0], pose[1], pose[2]),
-                               {e.scan[j].range, wrap(e.scan[j].bearing)}, r)
-              .mahalanobis2;
+      const double want = evaluate_observation(sensor, lm, Pose(pose[0], pose[1], pose[2]),
+                                               {e.scan[j].range, wrap(e.scan[j].bearing)}, r)
+                              .mahalanobis2;
       ASSERT_NEAR(got[j].mahalanobis2, want, 1e-9 * (1.0 + want)) << "observation " << j;
       ++associated;
     }
@@ -1759,8 +1791,7 @@ TEST_P(FilterUnknownAssociationTest, AssociationsAreTheMostLikelyParticlesChoice
     const std::size_t best = most_likely(filter.particles());
     const memory::ParticleStore& was = before->particles();
     const std::map<std::uint64_t, memory::Landmark> prior = landmarks_by_id(was, best);
-    const std::map<std::uint64_t, memory::Landmark> now =
-        landmarks_by_id(filter.particles(), best);
+    const std::map<std::uint64_t, memory::Landmark> now = landmarks_by_id(filter.particles(), best);
     const Pose pose(was.x()[best], was.y()[best], was.theta()[best]);
     const std::vector<ObservationAssociation> got = filter.estimate().associations;
     ASSERT_EQ(got.size(), e.scan.size());
