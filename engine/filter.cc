@@ -296,8 +296,19 @@ void Filter::save(std::ostream& out) const {
   internal::save_state(impl_->state, impl_->recorder.points(), out);
 }
 
-std::unique_ptr<Filter> Filter::load(std::istream& in) {
+std::unique_ptr<Filter> Filter::load(std::istream& in) { return load(in, nullptr); }
+
+std::unique_ptr<Filter> Filter::load(std::istream& in, const FilterConfig& execution) {
+  return load(in, &execution);
+}
+
+std::unique_ptr<Filter> Filter::load(std::istream& in, const FilterConfig* execution) {
   internal::StateHeader header = internal::read_header(in);
+  if (execution != nullptr) {
+    header.config.threads = execution->threads;
+    header.config.grain = execution->grain;
+    header.config.split_seconds = execution->split_seconds;
+  }
   std::unique_ptr<Impl> impl;
   try {
     impl = std::make_unique<Impl>(header.config);

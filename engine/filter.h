@@ -211,10 +211,14 @@ class Filter {
   // binary format; `load` throws std::runtime_error on a stream that is not one.
   void save(std::ostream& out) const;
   static std::unique_ptr<Filter> load(std::istream& in);
+  // As load, running with `execution`'s threads, grain and split_seconds instead of the saved
+  // ones (they change no result: the filter is bit-identical for any of them).
+  static std::unique_ptr<Filter> load(std::istream& in, const FilterConfig& execution);
 
  private:
   struct Impl;
   explicit Filter(std::unique_ptr<Impl> impl);
+  static std::unique_ptr<Filter> load(std::istream& in, const FilterConfig* execution);
   std::unique_ptr<Impl> impl_;
 };
 

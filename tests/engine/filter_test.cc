@@ -575,8 +575,19 @@ TEST_P(FilterAlgorithmTest, SaveLoadContinuesBitIdentically) {
       EXPECT_EQ(copy->statistics().resamples, original.statistics().resamples);
       // Saving the restored filter writes the same bytes.
       EXPECT_TRUE(saved(*copy) == bytes);
+      // Loaded to run on one thread with another grain: the same filter.
+      FilterConfig execution = config;
+      execution.threads = 1;
+      execution.grain = 7;
+      std::istringstream in(bytes);
+      std::unique_ptr<Filter> serial = Filter::load(in, execution);
+      EXPECT_EQ(serial->config().threads, 1u);
+      EXPECT_EQ(serial->config().grain, 7u);
       feed(original, s.events, cut, s.events.size());
       feed(*copy, s.events, cut, s.events.size());
+      feed(*serial, s.events, cut, s.events.size());
+      EXPECT_TRUE(identical(snapshot(*serial), snapshot(original)));
+      EXPECT_TRUE(identical(serial->estimate(), original.estimate()));
       EXPECT_TRUE(identical(snapshot(*copy), snapshot(original)));
       EXPECT_TRUE(identical(copy->estimate(), original.estimate()));
       EXPECT_TRUE(identical(copy->take_trajectory(), original.take_trajectory()));

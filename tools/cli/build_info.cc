@@ -39,13 +39,18 @@ std::string version_text() {
          (b.dirty ? " (with uncommitted changes)" : "") + "\nbuild type " + b.build_type +
          "\ncompiler " + b.compiler + "\nsimd " + b.simd +
          " (random-stream kernels; FASTSLAM_ISA=baseline|avx2|avx512 forces one in a portable "
-         "build), compiled for " + b.compiled_simd;
+         "build), compiled for " +
+         b.compiled_simd;
 }
 
 nlohmann::json build_info_json() {
   const BuildInfo b = build_info();
-  return {{"version", b.version},       {"commit", b.commit},     {"dirty", b.dirty},
-          {"build_type", b.build_type}, {"compiler", b.compiler}, {"simd", b.simd},
+  return {{"version", b.version},
+          {"commit", b.commit},
+          {"dirty", b.dirty},
+          {"build_type", b.build_type},
+          {"compiler", b.compiler},
+          {"simd", b.simd},
           {"compiled_simd", b.compiled_simd}};
 }
 

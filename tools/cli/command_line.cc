@@ -41,10 +41,10 @@ CLI::Validator whole_number() {
         const char* const first = text.data();
         const char* const last = first + text.size();
         const auto [end, ec] = std::from_chars(first, last, value);
-        const bool digits = !text.empty() && std::all_of(text.begin() + (text[0] == '-'),
-                                                         text.end(), [](char c) {
-                                                           return c >= '0' && c <= '9';
-                                                         }) && text != "-";
+        const bool digits = !text.empty() &&
+                            std::all_of(text.begin() + (text[0] == '-'), text.end(),
+                                        [](char c) { return c >= '0' && c <= '9'; }) &&
+                            text != "-";
         if (ec == std::errc() && end == last) return {};
         if (digits && (ec == std::errc::result_out_of_range || text[0] == '-')) {
           return "'" + clip(text) + "' is out of range (" +
@@ -324,7 +324,7 @@ void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::s
     CLI::Option* option = key == "config" ? nullptr : cmd.get_option_no_throw("--" + key);
     if (option == nullptr) fail("unknown option (keys are the long flag names without '--')");
     if (option->count() > 0) continue;  // given on the command line: the flag wins
-    if (value.is_null()) continue;       // unset, as metrics.json's "options" writes "none"
+    if (value.is_null()) continue;      // unset, as metrics.json's "options" writes "none"
     std::string text;
     if (value.is_string()) {
       text = value.get<std::string>();
@@ -385,6 +385,16 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
       throw std::invalid_argument(
           "--data - (standard input) can be read once; --seeds needs a file it can read again");
     }
+  }
+  if (!o.seeds.empty() && (!o.checkpoint.empty() || !o.resume.empty())) {
+    throw std::invalid_argument(
+        "--checkpoint and --resume are for one run; a sweep's seeds are separate runs: rerun "
+        "the seeds that did not finish");
+  }
+  if (o.data == "-" && (!o.checkpoint.empty() || !o.resume.empty())) {
+    throw std::invalid_argument(
+        "--data - (standard input) can be read once; --checkpoint and --resume need a file "
+        "that can be read again");
   }
   if (given("--match-radius")) o.match_radius = w.match_radius;
   if (given("--rpe-delta")) o.rpe_delta = w.rpe_delta;
@@ -520,6 +530,16 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(whole_number<std::uint64_t>())
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
       ->capture_default_str();
+  cmd.add_option("--checkpoint", o.checkpoint,
+                 "write the run's whole state to FILE (atomically) every --checkpoint-every "
+                 "scans and when a signal or --max-seconds stops it, for --resume");
+  cmd.add_option("--checkpoint-every", o.checkpoint_every, "scans between --checkpoint writes")
+      ->check(whole_number<std::uint64_t>())
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))
+      ->capture_default_str();
+  cmd.add_option("--resume", o.resume,
+                 "go on from a --checkpoint FILE made with the same options and inputs; the "
+                 "outputs are those of an uninterrupted run");
   cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
   o.plot_script = default_plot_script();
   cmd.add_flag_callback(

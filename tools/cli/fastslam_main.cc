@@ -13,8 +13,8 @@
 #include "engine/filter_config.h"
 #include "tools/cli/build_info.h"
 #include "tools/cli/command_line.h"
-#include "tools/cli/run_sweep.h"
 #include "tools/cli/run_command.h"
+#include "tools/cli/run_sweep.h"
 #include "tools/studies/lg_slam_experiment.h"
 #include "tools/studies/scaling_study.h"
 
@@ -129,8 +129,9 @@ int main(int argc, char** argv) {
   namespace tools = fastslam::tools;
   CLI::App app{"fastslam: a parallel, high-throughput FastSLAM 1.0/2.0 engine"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", [] { return fastslam::tools::version_text(); },
-                       "print the version, git commit, build type, compiler and SIMD level");
+  app.set_version_flag(
+      "--version", [] { return fastslam::tools::version_text(); },
+      "print the version, git commit, build type, compiler and SIMD level");
 
   tools::RunOptions run;
   tools::RunWords words;

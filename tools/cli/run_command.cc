@@ -21,6 +21,7 @@
 #include "engine/enum_names.h"
 #include "engine/filter.h"
 #include "tools/cli/build_info.h"
+#include "tools/cli/checkpoint.h"
 #include "tools/cli/interrupt.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
@@ -125,6 +126,21 @@ class TruthTracker {
   TruthIndex index_;
 };
 
+// Where a run stands in its source: events consumed, controls and scans among them, and the
+// latest truth pose (for the trace).
+struct Position {
+  std::uint64_t events = 0, controls = 0, scans = 0;
+  std::optional<StampedPose> last_truth;
+};
+
+// What a run with --checkpoint keeps to write one (tools/cli/checkpoint.h).
+struct Checkpointing {
+  std::string path;
+  std::uint64_t every = 1;
+  nlohmann::json identity;
+  std::vector<engine::TrajectoryPoint> poses;  // every pose handed to the recorder so far
+};
+
 // What the loop reads from and reports to besides the filter.
 struct RunLoop {
   const RunOptions& options;
@@ -136,7 +152,74 @@ struct RunLoop {
   ScanStream* stream;  // null: no stream
   ProgressBar& progress;
   ProgressState& state;
+  Position start;                       // where the loop begins: 0, or a checkpoint's position
+  engine::FilterStatistics before;      // a resumed run's phase timings before its checkpoint
+  Checkpointing* checkpoint = nullptr;  // null: no checkpoints
 };
+
+// `st` with the phase timings of the run before a resume added.
+engine::FilterStatistics with_timings_before(engine::FilterStatistics st,
+                                             const engine::FilterStatistics& before) {
+  st.predict_seconds += before.predict_seconds;
+  st.associate_seconds += before.associate_seconds;
+  st.update_seconds += before.update_seconds;
+  st.resample_seconds += before.resample_seconds;
+  return st;
+}
+
+// The run's own state in a checkpoint, and back.
+nlohmann::json run_state_json(const RunResult& r, const engine::FilterStatistics& st,
+                              const TraceWriter* trace) {
+  return {{"source_seconds", r.source_seconds},
+          {"filter_seconds", r.filter_seconds},
+          {"warnings", r.warnings},
+          {"unknown_id_seen", r.unknown_id_seen},
+          {"unlabelled_discarded", r.unlabelled_discarded},
+          {"trace_scans", trace != nullptr ? trace->scans() : 0},
+          {"seconds_per_phase",
+           {st.predict_seconds, st.associate_seconds, st.update_seconds, st.resample_seconds}}};
+}
+
+// Restores what run_state_json saved into `r` and `before` (the phase timings); returns the
+// trace's scan count. Throws std::runtime_error "PATH: ..." for a value of the wrong type.
+std::uint64_t restore_run_state(const std::string& path, const nlohmann::json& j, RunResult& r,
+                                engine::FilterStatistics& before) {
+  try {
+    r.source_seconds = j.at("source_seconds").get<double>();
+    r.filter_seconds = j.at("filter_seconds").get<double>();
+    r.warnings = j.at("warnings").get<std::vector<std::string>>();
+    r.unknown_id_seen = j.at("unknown_id_seen").get<bool>();
+    r.unlabelled_discarded = j.at("unlabelled_discarded").get<std::uint64_t>();
+    const auto phases = j.at("seconds_per_phase").get<std::vector<double>>();
+    if (phases.size() != 4) throw std::runtime_error("seconds_per_phase needs 4 values");
+    before.predict_seconds = phases[0];
+    before.associate_seconds = phases[1];
+    before.update_seconds = phases[2];
+    before.resample_seconds = phases[3];
+    return j.at("trace_scans").get<std::uint64_t>();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(path + ": not a usable checkpoint: its run state: " + e.what());
+  }
+}
+
+// Writes the loop's checkpoint at `at` (the events consumed so far); a FastSLAM filter only
+// (run_once refuses --checkpoint for the EKF baseline).
+template <class F>
+void write_loop_checkpoint(F& filter, const RunLoop& loop, const RunResult& r, const Position& at) {
+  if constexpr (std::is_same_v<F, engine::Filter>) {
+    Checkpointing& c = *loop.checkpoint;
+    const engine::FilterStatistics st = with_timings_before(filter.statistics(), loop.before);
+    Checkpoint saved;
+    saved.identity = c.identity;
+    saved.events = at.events;
+    saved.controls = at.controls;
+    saved.scans = at.scans;
+    saved.run = run_state_json(r, st, loop.trace);
+    if (loop.trace != nullptr) saved.trace = loop.trace->text();
+    saved.poses = c.poses;
+    write_checkpoint(c.path, saved, filter);
+  }
+}
 
 template <class F>
 void observe_state(F& filter, ProgressState& state) {
@@ -229,18 +312,33 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
   Event event;
   std::vector<engine::Observation> scan;
   const Clock::time_point start = Clock::now();
-  std::optional<StampedPose> last_truth;
-  std::uint64_t controls = 0, scans = 0;
-  for (std::uint64_t index = 0;; ++index) {
+  std::optional<StampedPose> last_truth = loop.start.last_truth;
+  std::uint64_t controls = loop.start.controls, scans = loop.start.scans;
+  // A stop the run can go on from: with --checkpoint, its state is saved here first.
+  const auto stop = [&](std::uint64_t index, const char* why) {
+    r.ended_by = why;
+    if (loop.checkpoint == nullptr) return;
+    try {
+      write_loop_checkpoint(filter, loop, r, {index, controls, scans, last_truth});
+      std::fprintf(stderr,
+                   "fastslam: %s: checkpoint of scan %llu written to %s; go on with "
+                   "--resume %s\n",
+                   why, static_cast<unsigned long long>(scans), loop.checkpoint->path.c_str(),
+                   loop.checkpoint->path.c_str());
+    } catch (const std::exception& e) {
+      r.failure = e.what();
+    }
+  };
+  for (std::uint64_t index = loop.start.events;; ++index) {
     const auto t0 = Clock::now();
     if (const int signal = interrupt_signal(); signal != 0) {
-      r.ended_by = interrupt_name(signal);
       r.interrupted_by = signal;
+      stop(index, interrupt_name(signal));
       break;
     }
     if (loop.options.max_seconds &&
         std::chrono::duration<double>(t0 - start).count() >= *loop.options.max_seconds) {
-      r.ended_by = "--max-seconds";
+      stop(index, "--max-seconds");
       break;
     }
     try {
@@ -290,7 +388,14 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             r.warnings.push_back(record_of(loop, index, event, controls, scans) + ": landmark id " +
                                  std::to_string(*id) + " is not among the source's true landmarks");
           }
-          loop.recorder.estimates(filter.take_trajectory());
+          {
+            const std::vector<engine::TrajectoryPoint> poses = filter.take_trajectory();
+            if (loop.checkpoint != nullptr) {
+              loop.checkpoint->poses.insert(loop.checkpoint->poses.end(), poses.begin(),
+                                            poses.end());
+            }
+            loop.recorder.estimates(poses);
+          }
           if (loop.stream != nullptr) {
             loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
                                seconds_since(t0));
@@ -304,6 +409,9 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
           if (loop.progress.due()) {
             observe_state(filter, loop.state);
             loop.progress.draw(loop.state);
+          }
+          if (loop.checkpoint != nullptr && scans % loop.checkpoint->every == 0) {
+            write_loop_checkpoint(filter, loop, r, {index + 1, controls, scans, last_truth});
           }
           break;
         case EventKind::kTruthPose:
@@ -334,7 +442,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     if (!r.failure) r.failure = e.what();
   }
   r.filter_seconds += seconds_since(t_end);
-  r.stats = filter.statistics();
+  r.stats = with_timings_before(filter.statistics(), loop.before);
   if (loop.trace != nullptr) {
     try {
       loop.trace->close();
@@ -347,6 +455,54 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     loop.state.total = loop.state.done;  // the expected total was an estimate; the run is done
     loop.progress.finish(loop.state);
   }
+}
+
+// Rebuilds the recorder and the truth tracker as they stood at checkpoint `c`: the source's
+// first c.events events again, the saved poses handed over after each scan as the run handed
+// them (Filter::take_trajectory drains to the scan's last control). Returns the position.
+// Throws std::runtime_error "PATH: ..." when the source does not match the checkpoint.
+Position replay(const std::string& path, const Checkpoint& c, RunLoop& loop) {
+  Event event;
+  std::vector<engine::Observation> scan;
+  Position at;
+  std::size_t handed = 0;
+  for (; at.events < c.events; ++at.events) {
+    if (!loop.source.next(event, scan)) {
+      throw std::runtime_error(path + ": the source ends after " + std::to_string(at.events) +
+                               " events, before the checkpoint's " + std::to_string(c.events) +
+                               "; resume with the input that made it");
+    }
+    switch (event.kind) {
+      case EventKind::kControl:
+        ++at.controls;
+        loop.recorder.control(event);
+        break;
+      case EventKind::kScan: {
+        ++at.scans;
+        loop.truth.see(scan);
+        std::size_t end = handed;
+        while (end < c.poses.size() && c.poses[end].control < at.controls) ++end;
+        loop.recorder.estimates(std::span(c.poses).subspan(handed, end - handed));
+        handed = end;
+        break;
+      }
+      case EventKind::kTruthPose:
+        loop.recorder.truth(event);
+        at.last_truth = StampedPose{event.time, event.x, event.y, event.theta};
+        break;
+      case EventKind::kGps:
+        loop.recorder.gps(event);
+        break;
+    }
+  }
+  if (at.controls != c.controls || at.scans != c.scans || handed != c.poses.size()) {
+    throw std::runtime_error(path + ": the source's first " + std::to_string(c.events) +
+                             " events hold " + std::to_string(at.controls) + " controls and " +
+                             std::to_string(at.scans) + " scans, the checkpoint's " +
+                             std::to_string(c.controls) + " and " + std::to_string(c.scans) +
+                             "; resume with the input that made it");
+  }
+  return at;
 }
 
 // The options with what the source decides filled in: the association, the match radius and
@@ -502,14 +658,42 @@ int run_simulation(const RunOptions& options) {
 }
 
 nlohmann::json run_once(const RunOptions& options) {
-  // Before any work: a run that cannot write its results does not start.
   const std::vector<std::string> input_paths = run_inputs(options);
+  const bool checkpointing = !options.checkpoint.empty();
+  const bool resuming = !options.resume.empty();
+  if ((checkpointing || resuming) && options.filter.algorithm == engine::Algorithm::kEkf) {
+    throw std::invalid_argument(
+        "--checkpoint and --resume save a FastSLAM filter's state; the ekf baseline has none");
+  }
+  // A checkpoint is checked before anything is changed: a refused resume leaves the output
+  // directory as it was. The inputs are hashed before the source reads them: what this run is
+  // about to read.
+  nlohmann::json inputs;
+  if (options.hash_inputs || checkpointing || resuming) inputs = input_files_json(options);
+  nlohmann::json identity;
+  std::optional<Checkpoint> resumed;
+  if (checkpointing || resuming) {
+    identity =
+        run_identity(resolved_options_json(options, options.filter, options.association), inputs);
+  }
+  if (resuming) {
+    resumed = read_checkpoint(options.resume);
+    check_same_run(options.resume, resumed->identity, identity);
+  }
+  // Before any work: a run that cannot write its results does not start.
   if (!options.out.empty()) prepare_output_dir(options.out, input_paths, kRunFileNames);
   if (!options.trace.empty()) {
     check_output_file("--trace", options.trace, input_paths, options.out, kRunFileNames);
   }
-  // Hashed before the source reads them: what this run is about to read.
-  nlohmann::json inputs = options.hash_inputs ? input_files_json(options) : nlohmann::json();
+  if (checkpointing) {
+    check_output_file("--checkpoint", options.checkpoint, input_paths, options.out, kRunFileNames);
+    if (options.checkpoint == options.trace) {
+      throw std::runtime_error("--checkpoint " + options.checkpoint + " is the --trace file");
+    }
+    AtomicFile probe(options.checkpoint);  // refuses a directory or an unwritable place now
+    remove_abandoned_temporaries(options.checkpoint);
+  }
+  if (!options.trace.empty()) remove_abandoned_temporaries(options.trace);
   RunResult r;
   const auto t_open = Clock::now();
   const SourceEntry& entry = find_source(options.source);
@@ -527,19 +711,42 @@ nlohmann::json run_once(const RunOptions& options) {
   state.total = static_cast<std::uint64_t>(info.expected_controls);
   state.particles = particles;
   TruthTracker truth(info.landmarks);
+  engine::FilterStatistics before;
+  std::uint64_t trace_scans = 0;
+  if (resumed) trace_scans = restore_run_state(options.resume, resumed->run, r, before);
   std::unique_ptr<TraceWriter> trace;
   if (!options.trace.empty()) {
-    trace = std::make_unique<TraceWriter>(options.trace, options.trace_every);
+    trace = resumed
+                ? std::make_unique<TraceWriter>(options.trace, options.trace_every, checkpointing,
+                                                resumed->trace, trace_scans)
+                : std::make_unique<TraceWriter>(options.trace, options.trace_every, checkpointing);
   }
   RunRecorder recorder(info.header, tracked_point_offset(options, info.header), options.out,
                        *resolved.rpe_delta);
   std::unique_ptr<ScanStream> stream;
   if (!options.stream.empty()) stream = std::make_unique<ScanStream>(options.stream);
-  RunLoop loop{resolved,    association,  *source,  truth, recorder,
-               trace.get(), stream.get(), progress, state};
+  Checkpointing checkpoint{options.checkpoint, options.checkpoint_every, identity, {}};
+  RunLoop loop{resolved,     association, *source, truth, recorder, trace.get(),
+               stream.get(), progress,    state,   {},    before,   nullptr};
+  if (checkpointing) loop.checkpoint = &checkpoint;
   if (ekf) {
     engine::EkfSlam filter(config);
     drive(filter, loop, r);
+  } else if (resumed) {
+    loop.start = replay(options.resume, *resumed, loop);
+    const std::unique_ptr<engine::Filter> filter = load_filter(options.resume, *resumed, config);
+    const engine::FilterConfig& saved = filter->config();
+    if (saved.particles != config.particles || saved.algorithm != config.algorithm ||
+        saved.association != config.association || saved.seed != config.seed) {
+      throw std::runtime_error(options.resume +
+                               ": the filter's state is not of this run's configuration");
+    }
+    checkpoint.poses = std::move(resumed->poses);
+    if (!options.quiet) {
+      std::fprintf(stderr, "fastslam: resumed from %s at scan %llu\n", options.resume.c_str(),
+                   static_cast<unsigned long long>(loop.start.scans));
+    }
+    drive(*filter, loop, r);
   } else {
     engine::Filter filter(config);
     drive(filter, loop, r);
@@ -566,7 +773,7 @@ nlohmann::json run_once(const RunOptions& options) {
   metrics["schema_version"] = kMetricsSchemaVersion;
   metrics["build"] = build_info_json();
   metrics["options"] = resolved_options_json(resolved, config, association.mode);
-  if (options.hash_inputs) metrics["inputs"] = std::move(inputs);
+  if (options.hash_inputs) metrics["inputs"] = inputs;
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;
   if (!options.quiet) print_summary(settings, r, text);
@@ -587,6 +794,12 @@ nlohmann::json run_once(const RunOptions& options) {
   }
   for (const std::string& e : errors) {
     if (e != r.failure) std::fprintf(stderr, "fastslam: error: %s\n", e.c_str());
+  }
+  // A complete run leaves nothing to resume.
+  if (checkpointing && errors.empty() && run_status(r) == "complete" &&
+      r.ended_by != "--max-seconds") {
+    std::error_code ignored;
+    std::filesystem::remove(options.checkpoint, ignored);
   }
   if (r.failure) {
     throw std::runtime_error(*r.failure + (options.out.empty()

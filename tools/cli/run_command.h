@@ -111,6 +111,16 @@ struct RunOptions {
   // A JSON line per scan as it is processed (tools/cli/scan_stream.h), to a file or "-" for
   // standard output (the summary then goes to standard error). Empty: none.
   std::string stream;
+  // Checkpoints (tools/cli/checkpoint.h): the whole run's state written atomically to this
+  // file every `checkpoint_every` scans and when a signal or --max-seconds stops the run, and
+  // removed once the run is complete. Empty: none. A FastSLAM filter and a source that can be
+  // read again (not standard input) only.
+  std::string checkpoint;
+  std::uint64_t checkpoint_every = 1000;
+  // A checkpoint to go on from, made with the same options (but those that change no result:
+  // threads, grain, output paths, budgets), inputs and build; the run then ends with the files
+  // the uninterrupted run would have written. Empty: start at the beginning.
+  std::string resume;
   bool progress = true;  // a progress bar on stderr when it is a terminal
   // With `out`: the matplotlib script run as `/usr/bin/python3 SCRIPT OUT` after the files are
   // written, to draw OUT/map.png (the command line sets tools/scripts/plot_run.py unless

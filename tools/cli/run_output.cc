@@ -65,9 +65,9 @@ bool inside(const std::filesystem::path& child, const std::filesystem::path& par
 
 }  // namespace
 
-TraceWriter::TraceWriter(const std::string& path, std::uint64_t every)
-    : every_(every == 0 ? 1 : every), file_(open_trace(path)) {
-  file_.write(
+TraceWriter::TraceWriter(const std::string& path, std::uint64_t every, bool keep_text)
+    : every_(every == 0 ? 1 : every), file_(open_trace(path)), keep_(keep_text) {
+  write(
       "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks,n_eff,"
       "distinct_particles,particle_spread_m,truth_spreads,nearest_weight\n");
 }
@@ -95,7 +95,18 @@ void TraceWriter::row(double t, std::optional<double> pose_error, std::optional<
     n += std::snprintf(line + n, sizeof(line) - n, ",,,,");
   }
   std::snprintf(line + n, sizeof(line) - n, "\n");
+  write(line);
+}
+
+void TraceWriter::write(std::string_view line) {
   file_.write(line);
+  if (keep_) text_ += line;
+}
+
+TraceWriter::TraceWriter(const std::string& path, std::uint64_t every, bool keep_text,
+                         const std::string& earlier, std::uint64_t scans)
+    : every_(every == 0 ? 1 : every), file_(open_trace(path)), scans_(scans), keep_(keep_text) {
+  write(earlier);
 }
 
 void TraceWriter::close() {

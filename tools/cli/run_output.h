@@ -34,7 +34,13 @@ class TraceWriter {
  public:
   // Throws std::runtime_error "--trace PATH: ..." when PATH cannot be written (a directory,
   // a device, a directory that does not exist).
-  TraceWriter(const std::string& path, std::uint64_t every);
+  // `keep_text`: for checkpoints (tools/cli/checkpoint.h), a copy of the file's text is kept
+  // for text() (O(rows) memory).
+  TraceWriter(const std::string& path, std::uint64_t every, bool keep_text = false);
+  // Resumes a trace where a checkpoint left it: the file starts with `earlier` (the header and
+  // the rows so far, text() of the writer that was saved) and due() goes on from `scans`.
+  TraceWriter(const std::string& path, std::uint64_t every, bool keep_text,
+              const std::string& earlier, std::uint64_t scans);
   // Counts a scan; true when this one gets a row.
   bool due() { return scans_++ % every_ == 0; }
   void row(double t, std::optional<double> pose_error, std::optional<double> map_error,
@@ -44,10 +50,18 @@ class TraceWriter {
   // std::runtime_error when the file could not be written.
   void close();
 
+  // The text written so far (with keep_text), and the scans due() has counted.
+  const std::string& text() const { return text_; }
+  std::uint64_t scans() const { return scans_; }
+
  private:
+  void write(std::string_view line);
+
   std::uint64_t every_;
   AtomicFile file_;
   std::uint64_t scans_ = 0;
+  bool keep_ = false;
+  std::string text_;
 };
 
 // Every name `fastslam run` writes in its output directory. A run removes these (and their

@@ -64,7 +64,8 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"waypoints-csv", path_or_null(o.waypoints_csv)},
       {"world", o.world},
       {"landmarks", o.landmarks},
-      {"spacing", o.spacing.value_or(o.world == "grid" ? kDefaultGridSpacing : kDefaultLoopSpacing)},
+      {"spacing",
+       o.spacing.value_or(o.world == "grid" ? kDefaultGridSpacing : kDefaultLoopSpacing)},
       {"loop-length", o.loop_length},
       {"scan-period", resolved_sim_config(world).dt_observe},
       {"sim-sigma-speed", o.sim.sigma_v},
@@ -128,6 +129,8 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"stream", path_or_null(o.stream)},
       {"max-steps", or_null(o.max_steps)},
       {"max-seconds", or_null(o.max_seconds)},
+      {"checkpoint", path_or_null(o.checkpoint)},
+      {"checkpoint-every", o.checkpoint_every},
       {"no-progress", !o.progress},
       {"no-plot", o.plot_script.empty()},
   };

@@ -27,8 +27,7 @@ inline constexpr int kMetricsSchemaVersion = 1;
 // The options object. `resolved`: the run's options with match_radius and rpe_delta set;
 // `config`: the filter's configuration built from them (filter_config); `association`: the
 // resolved mode ("known", "ml", "das" or "mixed").
-nlohmann::json resolved_options_json(const RunOptions& resolved,
-                                     const engine::FilterConfig& config,
+nlohmann::json resolved_options_json(const RunOptions& resolved, const engine::FilterConfig& config,
                                      const std::string& association);
 
 // The files the run reads, an array of {"option", "path", "bytes", "sha256"}: --config, and

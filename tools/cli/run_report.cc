@@ -173,31 +173,34 @@ std::string run_status(const RunResult& r) {
 
 void print_summary(const RunSettings& s, const RunResult& r, std::FILE* out) {
   const engine::FilterConfig& config = s.config;
-  std::fprintf(out, "%s, M = %u, %s association, seed %llu: %llu steps, %llu scans, %zu landmarks%s\n",
-              std::string(engine::to_string(config.algorithm)).c_str(), s.particles,
-              s.association.mode.c_str(), static_cast<unsigned long long>(config.seed),
-              static_cast<unsigned long long>(r.stats.controls),
-              static_cast<unsigned long long>(r.stats.scans), r.estimate.map.size(),
-              r.ended_by == "end of data" ? "" : (" (stopped by " + r.ended_by + ")").c_str());
+  std::fprintf(out,
+               "%s, M = %u, %s association, seed %llu: %llu steps, %llu scans, %zu landmarks%s\n",
+               std::string(engine::to_string(config.algorithm)).c_str(), s.particles,
+               s.association.mode.c_str(), static_cast<unsigned long long>(config.seed),
+               static_cast<unsigned long long>(r.stats.controls),
+               static_cast<unsigned long long>(r.stats.scans), r.estimate.map.size(),
+               r.ended_by == "end of data" ? "" : (" (stopped by " + r.ended_by + ")").c_str());
   const RecordedRun& t = r.trajectories;
   const double delta = *s.options.rpe_delta;
   if (t.filter.truth) {
     std::fprintf(out, "  pose error: %s\n", describe(*t.filter.truth, delta).c_str());
     if (t.dead_reckoning.truth) {
-      std::fprintf(out, "    dead reckoning: %s\n", describe(*t.dead_reckoning.truth, delta).c_str());
+      std::fprintf(out, "    dead reckoning: %s\n",
+                   describe(*t.dead_reckoning.truth, delta).c_str());
     }
   }
   if (t.filter.gps) {
     std::fprintf(out, "  GPS error: %s; %zu fixes, %zu skipped, %.3f m at the end\n",
-                describe(*t.filter.gps, delta).c_str(), t.filter.gps->raw.used,
-                t.filter.gps->raw.skipped, t.filter.gps->raw.last);
+                 describe(*t.filter.gps, delta).c_str(), t.filter.gps->raw.used,
+                 t.filter.gps->raw.skipped, t.filter.gps->raw.last);
     if (t.dead_reckoning.gps) {
       std::fprintf(out, "    dead reckoning: %s\n", describe(*t.dead_reckoning.gps, delta).c_str());
     }
   }
   if (r.map) {
     const MapScores& map = *r.map;
-    std::fprintf(out, 
+    std::fprintf(
+        out,
         "  map: GOSPA %.3f m (cutoff %g m, order 2): %zu assigned at %.3f m RMS, %zu missed, "
         "%zu false; precision %.3f, recall %.3f within %g m; landmark RMSE %.3f m over %zu "
         "matched of %zu observed\n",
@@ -205,21 +208,22 @@ void print_summary(const RunSettings& s, const RunResult& r, std::FILE* out) {
         localisation_rms(map.gospa), map.gospa.missed, map.gospa.false_targets, map.precision,
         map.recall, *s.options.match_radius, map.rmse, map.paired.matched, map.observed);
     if (map.gospa_aligned) {
-      std::fprintf(out, 
-          "    with the path's alignment: GOSPA %.3f m: %zu assigned at %.3f m RMS, %zu "
-          "missed, %zu false\n",
-          map.gospa_aligned->distance, map.gospa_aligned->assigned,
-          localisation_rms(*map.gospa_aligned), map.gospa_aligned->missed,
-          map.gospa_aligned->false_targets);
+      std::fprintf(out,
+                   "    with the path's alignment: GOSPA %.3f m: %zu assigned at %.3f m RMS, %zu "
+                   "missed, %zu false\n",
+                   map.gospa_aligned->distance, map.gospa_aligned->assigned,
+                   localisation_rms(*map.gospa_aligned), map.gospa_aligned->missed,
+                   map.gospa_aligned->false_targets);
     }
   }
   if (s.association.discard_unlabelled) {
     std::fprintf(out, "  mixed association: %llu unlabelled detections discarded\n",
-                static_cast<unsigned long long>(r.unlabelled_discarded));
+                 static_cast<unsigned long long>(r.unlabelled_discarded));
   }
-  std::fprintf(out, "  filter %.3f s, %s %.3f s (opening %.3f s), peak RSS %.1f MB\n", r.filter_seconds,
-              s.info.simulated ? "simulator" : "reading", r.open_seconds + r.source_seconds,
-              r.open_seconds, static_cast<double>(peak_rss_bytes()) / 1e6);
+  std::fprintf(out, "  filter %.3f s, %s %.3f s (opening %.3f s), peak RSS %.1f MB\n",
+               r.filter_seconds, s.info.simulated ? "simulator" : "reading",
+               r.open_seconds + r.source_seconds, r.open_seconds,
+               static_cast<double>(peak_rss_bytes()) / 1e6);
   if (worse_than_dead_reckoning(r)) {
     std::fprintf(stderr,
                  "warning: the filter's position error is larger than dead reckoning's on the same "

@@ -1,7 +1,9 @@
 #include "tools/io/atomic_file.h"
 
 #include <cerrno>
+#include <csignal>
 #include <cstring>
+#include <dirent.h>
 #include <fcntl.h>
 #include <stdexcept>
 #include <sys/stat.h>
@@ -67,6 +69,27 @@ AtomicFile::AtomicFile(const std::string& path) : path_(path), target_(resolve_o
 }
 
 AtomicFile::~AtomicFile() { discard(); }
+
+void remove_abandoned_temporaries(const std::string& path) {
+  const std::string target = resolve_output_path(path);
+  const std::size_t slash = target.rfind('/');
+  const std::string dir = slash == std::string::npos ? std::string(".") : target.substr(0, slash);
+  const std::string prefix =
+      "." + (slash == std::string::npos ? target : target.substr(slash + 1)) + ".tmp-";
+  DIR* listing = ::opendir(dir.empty() ? "/" : dir.c_str());
+  if (listing == nullptr) return;
+  while (const dirent* entry = ::readdir(listing)) {
+    const std::string name = entry->d_name;
+    if (!name.starts_with(prefix) || name.size() == prefix.size()) continue;
+    const std::string digits = name.substr(prefix.size());
+    if (digits.find_first_not_of("0123456789") != std::string::npos || digits.size() > 9) continue;
+    const pid_t pid = static_cast<pid_t>(std::stol(digits));
+    if (pid != ::getpid() && ::kill(pid, 0) != 0 && errno == ESRCH) {
+      ::unlink((dir + "/" + name).c_str());
+    }
+  }
+  ::closedir(listing);
+}
 
 bool AtomicFile::push(std::string_view text) {
   if (error_ != 0) return false;

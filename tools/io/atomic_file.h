@@ -73,6 +73,10 @@ class AtomicFile {
   std::ostream stream_{&streambuf_};
 };
 
+// Removes the temporaries of `path` (its target) that processes no longer running left (a run
+// killed with SIGKILL cannot remove its own). Costs one listing of the target's directory.
+void remove_abandoned_temporaries(const std::string& path);
+
 // Writes `text` to `path` as one AtomicFile.
 void write_file_atomically(const std::string& path, std::string_view text);
 
