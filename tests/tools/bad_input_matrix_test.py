@@ -12,8 +12,8 @@ error stays short whatever the size of the bad input.
 The rows: a valid log (made by `fastslam convert` from the built-in simulator) with one defect
 each (NaN, infinity, a hex float, 1e400, a NUL byte, a line cut short, a count of 10^9, time
 going backwards, a repeated header line, an unknown record, a line over 4 MiB, a scan over
-65536 observations, a 10^6-byte token, ...), an empty, missing or directory --data; bad
-options; bad --config files; --out targets that cannot be written (a file, /dev/null,
+65536 observations, a 10^6-byte token, ...), an empty, missing or directory --data, a world
+CSV with a 10^6-byte field; bad options; bad --config files; --out targets that cannot be written (a file, /dev/null,
 /dev/full, a 0555 directory, the input); SIGINT and SIGTERM mid-run; a full disk (a 64 KiB
 tmpfs); and refused calls of the Python module, whose filter state (to_bytes) must not change.
 A row that cannot run here (no root for the tmpfs, no Python module) prints why and is
@@ -183,6 +183,15 @@ def config(text):
     return make
 
 
+def world_csvs(d):
+    # A world CSV's route with a 10^6-byte bad field on its third line.
+    with open(os.path.join(d, "lm.csv"), "w") as f:
+        f.write("id,x_m,y_m\n0,0,0\n1,5,0\n")
+    with open(os.path.join(d, "wp.csv"), "w") as f:
+        f.write("index,x_m,y_m\n0,0,0\n1," + "7" * 10**6 + "x,0\n")
+    return {}
+
+
 def regular_file(d):
     with open(os.path.join(d, "file"), "w") as f:
         f.write("the user's file\n")
@@ -322,6 +331,10 @@ CASES = [
          "{log}: cannot open for reading: No such file or directory", absent=NOTHING),
     Case("directory as --data", directory, LOG_RUN, 1, "{log}: is a directory, not a log file",
          **REFUSED, **KEPT),
+    Case("world CSV with a 10^6-byte field", world_csvs,
+         SMALL + ["--landmarks-csv", "{dir}/lm.csv", "--waypoints-csv", "{dir}/wp.csv"], 1,
+         "{dir}/wp.csv:3: column 'x_m': '" + "7" * 80 + "...' (1000001 bytes) is not a number",
+         max_stderr=300, **REFUSED, **KEPT),
     Case("engine refuses a record mid-run", duplicate_id, LOG_RUN + ["--association", "known"], 1,
          "{log}:{line} (scan 2, t = 0.200 s): ", present=("metrics.json", "trajectory.csv"),
          earlier="replaced", status="failed: "),
