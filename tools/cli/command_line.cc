@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cmath>
 #include <fstream>
 #include <limits>
 #include <numbers>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <sys/resource.h>
 #include <thread>
@@ -29,6 +31,13 @@ constexpr std::size_t kMaxQuoted = 80;
 std::string clip(const std::string& text) {
   if (text.size() <= kMaxQuoted) return text;
   return text.substr(0, kMaxQuoted) + "... (" + std::to_string(text.size()) + " bytes)";
+}
+
+// A bound for a message, in its shortest exact form (0.001, 3600).
+std::string format_bound(double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof(buf), v);
+  return std::string(buf, r.ptr);
 }
 
 // Decimal integers within T's range, checked on the text: CLI11's own conversion clamps
@@ -56,6 +65,49 @@ CLI::Validator whole_number() {
       "INT", "whole number");
 }
 
+// Decimal reals (1.5, -2, 1e-3; not hex, NaN or infinity) within [lo, hi], or (lo, hi] when
+// `open_low`, checked on the text: CLI11's own ranges let NaN through, print 2^1024 in full
+// as their bound and quote the whole value back.
+CLI::Validator real_number(double lo, double hi, bool open_low, std::string description) {
+  return CLI::Validator(
+      [lo, hi, open_low](std::string& text) -> std::string {
+        const std::size_t sign = !text.empty() && text[0] == '+';
+        const char* const first = text.data() + sign;
+        const char* const last = text.data() + text.size();
+        double value = 0.0;
+        const auto [end, ec] = std::from_chars(first, last, value, std::chars_format::general);
+        const std::string quoted = "'" + clip(text) + "'";
+        if (ec == std::errc::result_out_of_range && end == last) {
+          return quoted + " is out of a double's range";
+        }
+        if (ec != std::errc() || end != last || first == last) return quoted + " is not a number";
+        if (!std::isfinite(value)) return quoted + " is not a finite number";
+        if ((open_low ? value > lo : value >= lo) && value <= hi) return {};
+        if (hi == std::numeric_limits<double>::max()) {
+          return quoted + (open_low ? " must be > " : " must be >= ") + format_bound(lo);
+        }
+        return quoted + " is not in " + (open_low ? "(" : "[") + format_bound(lo) + ", " +
+               format_bound(hi) + "]";
+      },
+      std::move(description));
+}
+CLI::Validator positive_number() {
+  return real_number(0.0, std::numeric_limits<double>::max(), true, "POSITIVE");
+}
+CLI::Validator non_negative_number() {
+  return real_number(0.0, std::numeric_limits<double>::max(), false, "NONNEGATIVE");
+}
+CLI::Validator finite_number() {
+  return real_number(std::numeric_limits<double>::lowest(), std::numeric_limits<double>::max(),
+                     false, "FINITE");
+}
+// Described as CLI::Range describes a double range: "FLOAT in [LO - HI]".
+CLI::Validator number_in(double lo, double hi) {
+  std::ostringstream description;
+  description << "FLOAT in [" << lo << " - " << hi << "]";
+  return real_number(lo, hi, false, description.str());
+}
+
 // The world of a simulated source (shared by run and convert).
 void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--landmarks-csv", o.landmarks_csv,
@@ -73,30 +125,30 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->capture_default_str();
   cmd.add_option("--spacing", w.spacing,
                  "metres per landmark in procedural worlds (default: 2 on a grid, 10 on a loop)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd.add_option("--loop-length", o.loop_length, "length of a loop world, metres")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_option("--scan-period", w.scan_period,
                  "seconds between simulated scans (default: 1 on a grid, else Bailey's 0.2)")
-      ->check(CLI::Range(0.001, 3600.0));
+      ->check(number_in(0.001, 3600.0));
   // The simulator's true noises. The filter assumes the same unless --sigma-* says otherwise
   // (a simulated source's header carries these), so one flag scales both.
   cmd.add_option("--sim-sigma-speed", o.sim.sigma_v,
                  "simulated speed noise, m/s (true and, unless --sigma-u0, the filter's)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
   cmd.add_option("--sim-sigma-steer", o.sim.sigma_steer,
                  "simulated steering noise, rad (true and, unless --sigma-u1, the filter's)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
   cmd.add_option("--sim-sigma-range", o.sim.sigma_range,
                  "simulated range noise, m (true and, unless --sigma-range, the filter's)")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_option("--sim-sigma-bearing", o.sim.sigma_bearing,
                  "simulated bearing noise, rad (true and, unless --sigma-bearing, the filter's)")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_option("--loops", w.loops,
                  "times the route is driven (default: 2 for CSV worlds, 1 else)")
@@ -104,7 +156,7 @@ void add_world_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::Range(1, 1000));
   cmd.add_option("--at-waypoint", o.sim.at_waypoint,
                  "metres within which the simulated car has reached a waypoint")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
 }
 
@@ -145,40 +197,43 @@ void add_utias_options(CLI::App& cmd, RunOptions& o) {
 void add_victoria_park_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--heading-fit-seconds", o.victoria_park.heading_fit_seconds,
                  "victoria-park: seconds of GPS after the first fix the start heading is fitted to")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_flag("--split-controls", o.victoria_park.split_controls_at_scans,
                "victoria-park: cut the odometry interval holding a scan at the scan time");
   VictoriaParkGate& gate = o.victoria_park.gate;
   cmd.add_option("--vp-min-range", gate.min_range,
                  "victoria-park: detections nearer than this are dropped, m")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
   cmd.add_option("--vp-max-range", gate.max_range,
                  "victoria-park: detections farther than this are dropped, m (also the range "
                  "within which negative information expects trees)")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_option("--vp-min-bearing-deg", w.vp_min_bearing_deg,
                  "victoria-park: detections right of this bearing are dropped, degrees "
-                 "(default -87.1: the detector's scan-edge margin)");
+                 "(default -87.1: the detector's scan-edge margin)")
+      ->check(finite_number());
   cmd.add_option(
-      "--vp-max-bearing-deg", w.vp_max_bearing_deg,
-      "victoria-park: detections left of this bearing are dropped, degrees (default 87.1)");
-  cmd.add_option(
-      "--vp-laser-yaw-deg", w.vp_laser_yaw_deg,
-      "victoria-park: the laser's yaw on the car, degrees counter-clockwise (default 0)");
+         "--vp-max-bearing-deg", w.vp_max_bearing_deg,
+         "victoria-park: detections left of this bearing are dropped, degrees (default 87.1)")
+      ->check(finite_number());
+  cmd.add_option("--vp-laser-yaw-deg", w.vp_laser_yaw_deg,
+                 "victoria-park: the laser's yaw on the car, degrees counter-clockwise (default 0)")
+      ->check(finite_number());
   cmd.add_option("--vp-laser-x", o.victoria_park.geometry.a,
                  "victoria-park: the laser's distance ahead of the rear axle, m (the model's a)")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_option("--vp-laser-y", o.victoria_park.geometry.b,
                  "victoria-park: the laser's offset left of the car's centre line, m (the "
                  "model's b)")
+      ->check(finite_number())
       ->capture_default_str();
   cmd.add_option("--vp-max-diameter", gate.max_diameter,
                  "victoria-park: detections wider than this are dropped, m (default: no limit)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
 }
 
 // Option groups of `run`, defined at the end of the file.
@@ -224,28 +279,29 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   add_execution_options(cmd, o, w);
   cmd.add_option("--sigma-range", w.sigma_range,
                  "filter range noise, m (default: the source's; the simulator keeps its own)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd.add_option("--sigma-bearing", w.sigma_bearing,
                  "filter bearing noise, rad (default: the source's)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd.add_option("--sigma-u0", w.sigma_control0,
                  "filter noise of the first control component (speed m/s for the cars, v for the "
                  "unicycle, the v increment without odometry; default: the source's)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd.add_option("--sigma-u1", w.sigma_control1,
                  "filter noise of the second control component (steering rad, omega, the omega "
                  "increment; default: the source's)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd.add_option("--max-range", w.max_range,
                  "the filter's sensor range, m: beyond it no landmark is expected to be seen "
                  "(default: the source's)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd.add_option("--field-of-view-deg", w.field_of_view_deg,
                  "the filter's sensor field of view, degrees centred ahead (default: the "
                  "source's)")
-      ->check(CLI::Range(0.001, 360.0));
+      ->check(number_in(0.001, 360.0));
   cmd.add_option("--initial-heading-deg", w.initial_heading_deg,
-                 "start heading, degrees (default: the source's; victoria-park fits it to GPS)");
+                 "start heading, degrees (default: the source's; victoria-park fits it to GPS)")
+      ->check(finite_number());
   add_victoria_park_options(cmd, o, w);
   add_utias_options(cmd, o);
   add_output_options(cmd, o, w);
@@ -319,7 +375,7 @@ void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::s
   if (!config.is_object()) throw std::runtime_error(where + ": expected one JSON object");
   for (const auto& [key, value] : config.items()) {
     auto fail = [&](const std::string& what) {
-      throw std::runtime_error(where + ": key '" + key + "': " + what);
+      throw std::runtime_error(where + ": key '" + clip(key) + "': " + what);
     };
     CLI::Option* option = key == "config" ? nullptr : cmd.get_option_no_throw("--" + key);
     if (option == nullptr) fail("unknown option (keys are the long flag names without '--')");
@@ -423,40 +479,42 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   engine::FilterConfig& f = o.filter;
   cmd.add_option("--log-p0", f.log_new_landmark,
                  "ln p0, the log-likelihood of a new landmark (ml, das)")
+      ->check(finite_number())
       ->capture_default_str();
   cmd.add_option("--gate", f.gating.gate,
                  "squared Mahalanobis gate for association candidates (ml, das)")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_flag("!--no-negative-information", f.existence.negative_information,
                "never remove landmarks that were in view and not seen (ml, das)");
   cmd.add_option("--existence-missed", f.existence.missed,
                  "log-odds a landmark loses when in view and not seen (ml, das)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
   cmd.add_option("--existence-confirm-at", f.existence.confirm_at,
                  "log-odds from which a landmark is in the reported map; below, it is "
                  "provisional (ml, das)")
+      ->check(finite_number())
       ->capture_default_str();
   cmd.add_option("--existence-range-margin", f.existence.range_margin,
                  "metres inside the sensor range where a missed landmark counts (ml, das)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
   cmd.add_option("--clutter", o.sim.clutter_rate,
                  "simulated false alarms per scan (Poisson mean; ml, das)")
-      ->check(CLI::Range(0.0, 1000.0))
+      ->check(number_in(0.0, 1000.0))
       ->capture_default_str();
   cmd.add_option("--detection-probability", o.sim.detection_probability,
                  "probability that the simulated sensor detects a landmark in view")
-      ->check(CLI::Range(0.0, 1.0))
+      ->check(number_in(0.0, 1.0))
       ->capture_default_str();
   cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
                  "ekf with ml: associate when the squared Mahalanobis distance is below this")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_option("--ekf-gate-new", f.ekf.gate_new,
                  "ekf with ml: a new landmark when every squared Mahalanobis distance exceeds it")
-      ->check(CLI::PositiveNumber)
+      ->check(positive_number())
       ->capture_default_str();
   cmd.add_flag("--ekf-jcbb", f.ekf.joint_compatibility,
                "ekf with ml: joint compatibility branch and bound instead of greedy nearest");
@@ -464,11 +522,11 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "metres within which estimated and true landmarks are paired (precision, "
                  "recall, the landmark RMSE of ml and das) and GOSPA's cutoff (default: the "
                  "source's, 5; half the spacing of a procedural world)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd.add_option("--rpe-delta", w.rpe_delta,
                  "metres of true path between the poses of a relative pose error pair (default: "
                  "the source's, 10)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
 }
 
 // Seed, threads and resampling.
@@ -493,14 +551,14 @@ void add_execution_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--split-seconds", f.split_seconds,
                  "a pass whose previous one took longer is split across the threads whatever "
                  "--grain (0: always)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(non_negative_number())
       ->capture_default_str();
   cmd.add_option("--resample", w.resample, "when to resample: every (scan) or neff")
       ->check(CLI::IsMember(engine::enum_names<ResamplePolicy::When>()))
       ->capture_default_str();
   cmd.add_option("--neff-fraction", f.resample.ess_fraction,
                  "with --resample neff: resample when N_eff < fraction x M")
-      ->check(CLI::Range(0.0, 1.0))
+      ->check(number_in(0.0, 1.0))
       ->capture_default_str();
   cmd.add_option("--resample-scheme", w.scheme, "how to draw the ancestors")
       ->check(CLI::IsMember(engine::enum_names<ResampleScheme>()))
@@ -525,7 +583,7 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 62));
   cmd.add_option("--max-seconds", w.max_seconds,
                  "stop after this much wall time and report what the run has (default: none)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
       ->check(whole_number<std::uint64_t>())
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))

@@ -681,7 +681,8 @@ nlohmann::json run_once(const RunOptions& options) {
     check_same_run(options.resume, resumed->identity, identity);
   }
   // Before any work: a run that cannot write its results does not start.
-  if (!options.out.empty()) prepare_output_dir(options.out, input_paths, kRunFileNames);
+  CreatedDir created(options.out, !options.out.empty() &&
+                                      check_output_dir(options.out, input_paths, kRunFileNames));
   if (!options.trace.empty()) {
     check_output_file("--trace", options.trace, input_paths, options.out, kRunFileNames);
   }
@@ -704,6 +705,11 @@ nlohmann::json run_once(const RunOptions& options) {
       resolve_association(options.association, info, entry.defaults);
   const RunOptions resolved = resolve_options(options, info, association);
   const engine::FilterConfig config = filter_config(resolved, info.header);
+  engine::validate(config);
+  // The source opened and the settings accepted: only now does the run replace an earlier
+  // one's files, so a run refused for its input or options leaves them as they were.
+  if (!options.out.empty()) clear_earlier_run(options.out, kRunFileNames);
+  created.keep();
   const bool ekf = config.algorithm == engine::Algorithm::kEkf;
   const std::uint32_t particles = ekf ? 1 : config.particles;
   ProgressBar progress(options.progress);

@@ -117,12 +117,13 @@ void TraceWriter::close() {
   }
 }
 
-void prepare_output_dir(const std::string& dir, std::span<const std::string> inputs,
-                        std::span<const char* const> names) {
+bool check_output_dir(const std::string& dir, std::span<const std::string> inputs,
+                      std::span<const char* const> names) {
   namespace fs = std::filesystem;
   const std::string what = "--out " + dir + ": ";
   struct stat st {};
-  if (::stat(dir.c_str(), &st) == 0 && !S_ISDIR(st.st_mode)) {
+  const bool exists = ::stat(dir.c_str(), &st) == 0;
+  if (exists && !S_ISDIR(st.st_mode)) {
     throw std::runtime_error(what + "exists and is not a directory");
   }
   std::error_code error;
@@ -153,8 +154,15 @@ void prepare_output_dir(const std::string& dir, std::span<const std::string> inp
   }
   ::close(fd);
   ::unlink(probe.c_str());
+  return !exists;
+}
+
+void clear_earlier_run(const std::string& dir, std::span<const char* const> names) {
+  namespace fs = std::filesystem;
+  const std::string what = "--out " + dir + ": ";
+  std::error_code error;
   // An earlier run's files, so this one's never sit beside them; nothing else is touched.
-  for (const fs::directory_entry& entry : fs::directory_iterator(out)) {
+  for (const fs::directory_entry& entry : fs::directory_iterator(dir)) {
     const std::string file = entry.path().filename().string();
     for (const char* name : names) {
       const std::string temp = std::string(".") + name + ".tmp-";
@@ -169,6 +177,16 @@ void prepare_output_dir(const std::string& dir, std::span<const std::string> inp
       }
     }
   }
+}
+
+void prepare_output_dir(const std::string& dir, std::span<const std::string> inputs,
+                        std::span<const char* const> names) {
+  check_output_dir(dir, inputs, names);
+  clear_earlier_run(dir, names);
+}
+
+CreatedDir::~CreatedDir() {
+  if (!dir_.empty()) ::rmdir(dir_.c_str());  // fails, harmlessly, unless it is empty
 }
 
 void check_output_file(const std::string& option, const std::string& path,

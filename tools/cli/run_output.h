@@ -15,6 +15,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json_fwd.hpp>
@@ -73,11 +74,31 @@ inline constexpr const char* kRunFileNames[] = {
 
 // Checks `dir` before a run does any work: refuses (std::runtime_error "--out DIR: ...") a
 // path that is not a directory, cannot be created or written, is one of `inputs` or lies
-// inside one, or holds an input under one of `names`; creates it; removes the `names` (and
-// `.NAME.tmp-*` left by a killed run) that an earlier run left. Costs: one probe file, one
-// directory listing.
+// inside one, or holds an input under one of `names`; creates it. Returns whether it created
+// `dir`. Costs: one probe file.
+bool check_output_dir(const std::string& dir, std::span<const std::string> inputs,
+                      std::span<const char* const> names);
+// Removes from `dir` the `names` (and `.NAME.tmp-*` left by a killed run) that an earlier run
+// left, and nothing else; throws std::runtime_error "--out DIR: ..." for one it cannot remove
+// or a directory under one of the names. Costs: one directory listing.
+void clear_earlier_run(const std::string& dir, std::span<const char* const> names);
+// check_output_dir, then clear_earlier_run.
 void prepare_output_dir(const std::string& dir, std::span<const std::string> inputs,
                         std::span<const char* const> names);
+
+// The output directory a run created, removed again at scope exit if it is still empty (the
+// run was refused before it wrote anything) unless keep() was called. Not copyable.
+class CreatedDir {
+ public:
+  CreatedDir(std::string dir, bool created) : dir_(created ? std::move(dir) : std::string()) {}
+  CreatedDir(const CreatedDir&) = delete;
+  CreatedDir& operator=(const CreatedDir&) = delete;
+  ~CreatedDir();
+  void keep() noexcept { dir_.clear(); }
+
+ private:
+  std::string dir_;
+};
 
 // Refuses (std::runtime_error "OPTION PATH: ...") an output file `path` that is one of `inputs`
 // or, in `dir` (may be empty), one of the run's `names`.

@@ -1,6 +1,5 @@
 #include "tools/datasets/streamed_log_source.h"
 
-#include <fstream>
 #include <iostream>
 #include <stdexcept>
 #include <utility>
@@ -9,12 +8,6 @@ namespace fastslam::tools {
 namespace {
 
 constexpr const char* kStdin = "<stdin>";
-
-std::unique_ptr<std::istream> open_file(const std::string& path) {
-  auto file = std::make_unique<std::ifstream>(path);
-  if (!*file) throw std::runtime_error(path + ": cannot open for reading");
-  return file;
-}
 
 }  // namespace
 
@@ -25,7 +18,7 @@ StreamedLogSource::StreamedLogSource(const std::string& path)
   std::vector<engine::Observation> scan;
   if (path != "-") {
     // The first pass: every record checked, and what the source knows up front.
-    const std::unique_ptr<std::istream> first = open_file(path);
+    const std::unique_ptr<std::istream> first = open_log_file(path);
     LogReader check(*first, name_);
     std::size_t labelled = 0, observations = 0;
     while (check.next(e, scan)) {
@@ -37,7 +30,7 @@ StreamedLogSource::StreamedLogSource(const std::string& path)
     }
     info_.labels = labels_of(labelled, observations);
     info_.landmarks = check.landmarks();
-    file_ = open_file(path);
+    file_ = open_log_file(path);
     reader_ = std::make_unique<LogReader>(*file_, name_);
     info_.header = reader_->header();
     landmarks_known_ = info_.landmarks.size();

@@ -2,7 +2,9 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstddef>
 #include <stdexcept>
+#include <string>
 #include <string_view>
 #include <utility>
 
@@ -28,6 +30,29 @@ std::vector<std::string_view> split(std::string_view line) {
   return fields;
 }
 
+// A field for a message: its first 80 bytes (control bytes as \xNN), then its length when
+// longer, so a megabyte of garbage does not become a megabyte of message.
+std::string quoted(std::string_view field) {
+  constexpr std::size_t kMaxQuoted = 80;
+  std::string out(1, '\'');
+  for (const char c : field.substr(0, kMaxQuoted)) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u >= 0x20 && u != 0x7f) {
+      out.push_back(c);
+    } else {
+      constexpr char kHex[] = "0123456789abcdef";
+      out.append("\\x").push_back(kHex[u >> 4]);
+      out.push_back(kHex[u & 15]);
+    }
+  }
+  if (field.size() > kMaxQuoted) out.append("...");
+  out.push_back('\'');
+  if (field.size() > kMaxQuoted) {
+    out.append(" (").append(std::to_string(field.size())).append(" bytes)");
+  }
+  return out;
+}
+
 }  // namespace
 
 CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
@@ -41,7 +66,7 @@ CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
   if (!same) {
     std::string expected;
     for (const std::string& c : columns_) expected += (expected.empty() ? "" : ",") + c;
-    fail("header is '" + std::string(trim(text_)) + "', expected '" + expected + "'");
+    fail("header is " + quoted(trim(text_)) + ", expected '" + expected + "'");
   }
 }
 
@@ -59,10 +84,10 @@ bool CsvReader::next(std::span<double> out) {
       double value = 0.0;
       const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
       if (f.empty() || ec != std::errc() || end != f.data() + f.size()) {
-        fail("column '" + columns_[i] + "': '" + std::string(f) + "' is not a number");
+        fail("column '" + columns_[i] + "': " + quoted(f) + " is not a number");
       }
       if (!std::isfinite(value)) {
-        fail("column '" + columns_[i] + "': value '" + std::string(f) + "' is not finite");
+        fail("column '" + columns_[i] + "': value " + quoted(f) + " is not finite");
       }
       out[i] = value;
     }

@@ -1,10 +1,13 @@
 #include "tools/io/log_format.h"
 
 #include <cctype>
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <ios>
 #include <istream>
 #include <memory>
 #include <numbers>
@@ -29,10 +32,27 @@ constexpr std::string_view kMagic = "fastslam-log";
 
 bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
 
+// The first kMaxQuotedBytes of a token for a message, with control bytes (a NUL, an escape)
+// written as \xNN: a NUL would otherwise end the message where it is printed as a C string.
+std::string printable(std::string_view token) {
+  std::string out;
+  for (const char c : token.substr(0, kMaxQuotedBytes)) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u >= 0x20 && u != 0x7f) {
+      out.push_back(c);
+    } else {
+      constexpr char kHex[] = "0123456789abcdef";
+      out.append("\\x").push_back(kHex[u >> 4]);
+      out.push_back(kHex[u & 15]);
+    }
+  }
+  return out;
+}
+
 // A token for a message: whole up to kMaxQuotedBytes, else its start and its length, so a
 // megabyte of garbage does not become a megabyte of message.
 std::string clipped(std::string_view token) {
-  std::string out(token.substr(0, kMaxQuotedBytes));
+  std::string out = printable(token);
   if (token.size() > kMaxQuotedBytes) {
     out.append("... (").append(std::to_string(token.size())).append(" bytes)");
   }
@@ -40,8 +60,7 @@ std::string clipped(std::string_view token) {
 }
 std::string quoted(std::string_view token) {
   std::string out(1, '\'');
-  out.append(token.substr(0, kMaxQuotedBytes));
-  out.push_back('\'');
+  out.append(printable(token)).push_back('\'');
   if (token.size() > kMaxQuotedBytes) {
     out.insert(out.size() - 1, "...");
     out.append(" (").append(std::to_string(token.size())).append(" bytes)");
@@ -238,7 +257,8 @@ class LogReader::Parser {
 
   // One line into text_, without its '\n'; false at the end of the input with nothing read.
   // A line is at most kMaxLogLineBytes, so input without newlines (a binary file, /dev/zero)
-  // fails there instead of being read whole.
+  // fails there instead of being read whole. A read the system refuses (a directory, an I/O
+  // error) fails naming the file and line, not with the stream buffer's bare message.
   bool read_line() {
     text_.clear();
     std::streambuf* const buffer = in_.rdbuf();
@@ -246,7 +266,12 @@ class LogReader::Parser {
     ++line_;
     bool any = false;
     for (;;) {
-      const int c = buffer->sbumpc();
+      int c = 0;
+      try {
+        c = buffer->sbumpc();
+      } catch (const std::ios_base::failure& e) {
+        fail("cannot read: " + e.code().message());
+      }
       if (c == std::char_traits<char>::eof()) {
         in_.setstate(std::ios::eofbit);
         if (!any) --line_;
@@ -278,6 +303,9 @@ class LogReader::Parser {
     const std::string_view f = tokens_[i];
     double value = 0.0;
     const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
+    if (ec == std::errc::result_out_of_range && end == f.data() + f.size()) {
+      fail(std::string(what) + ": " + quoted(f) + " is out of a double's range");
+    }
     if (ec != std::errc() || end != f.data() + f.size()) {
       fail(std::string(what) + ": " + quoted(f) + " is not a number");
     }
@@ -408,9 +436,23 @@ Log read_log(std::istream& in, const std::string& name) {
 }
 
 Log read_log(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  return read_log(in, path);
+  const std::unique_ptr<std::istream> in = open_log_file(path);
+  return read_log(*in, path);
+}
+
+std::unique_ptr<std::istream> open_log_file(const std::string& path) {
+  // A directory opens as a file on Linux and fails at the first read: refused here instead.
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) {
+    throw std::runtime_error(path + ": is a directory, not a log file");
+  }
+  errno = 0;
+  auto in = std::make_unique<std::ifstream>(path);
+  if (!*in) {
+    throw std::runtime_error(path + ": cannot open for reading" +
+                             (errno != 0 ? std::string(": ") + std::strerror(errno) : ""));
+  }
+  return in;
 }
 
 // ---- writing ----

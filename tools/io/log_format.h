@@ -7,7 +7,7 @@
 // number, NaN or infinity, a negative range or dt, time going backwards, a missing or repeated
 // header line, a repeated landmark id, a line or a scan over the limits below) throws
 // std::runtime_error "<file>:<line>: <reason>", quoting at most kMaxQuotedBytes of a bad
-// token, and returns nothing partial. Writing prints every double in its shortest exact form
+// token (control bytes such as NUL as \xNN), and returns nothing partial. Writing prints every double in its shortest exact form
 // (std::to_chars), so write -> read gives back bit-identical doubles.
 //
 // Ownership: `Log` is a plain value; `LogWriter` borrows its stream, which must outlive it.
@@ -116,6 +116,9 @@ class LogReader {
 Log read_log(const std::string& path);
 // The same from a stream; `name` stands for the file in messages.
 Log read_log(std::istream& in, const std::string& name);
+// `path` opened for a LogReader: throws std::runtime_error "PATH: REASON" for a directory or a
+// file that cannot be opened (the system's reason). Allocates the stream.
+std::unique_ptr<std::istream> open_log_file(const std::string& path);
 
 // Writes `log` to `path` (whole or not at all: tools/io/atomic_file.h; throws
 // std::runtime_error when the file cannot be written) or to a stream. Throws

@@ -169,6 +169,38 @@ TEST_F(CommandLine, IntegersOutOfRangeAreRefusedNotClampedOrWrapped) {
   EXPECT_NE(e.find("key 'seed': --seed: '-1' is out of range"), std::string::npos) << e;
 }
 
+// CLI11's double ranges let NaN through, print their bound 2^1024 in full digits and quote a
+// value of any length; these are refused briefly instead.
+TEST_F(CommandLine, RealsAreFiniteDecimalsWithinTheirRange) {
+  EXPECT_EQ(run("{}", "--max-seconds 1e-3").max_seconds.value(), 1e-3);
+  EXPECT_EQ(run("{}", "--sigma-u0 0").model.sigma_control0.value(), 0.0);
+  EXPECT_EQ(run("{}", "--log-p0 -12.5").filter.log_new_landmark, -12.5);
+  for (const auto& [args, expected] : std::vector<std::pair<std::string, std::string>>{
+           {"--max-seconds nan", "--max-seconds: 'nan' is not a finite number"},
+           {"--max-seconds inf", "--max-seconds: 'inf' is not a finite number"},
+           {"--max-seconds -1", "--max-seconds: '-1' must be > 0"},
+           {"--max-seconds 0", "--max-seconds: '0' must be > 0"},
+           {"--max-seconds 0x10", "--max-seconds: '0x10' is not a number"},
+           {"--max-seconds 1e400", "--max-seconds: '1e400' is out of a double's range"},
+           {"--sigma-u0 -0.5", "--sigma-u0: '-0.5' must be >= 0"},
+           {"--clutter 1001", "--clutter: '1001' is not in [0, 1000]"},
+           {"--neff-fraction nan", "--neff-fraction: 'nan' is not a finite number"},
+           {"--scan-period 0", "--scan-period: '0' is not in [0.001, 3600]"},
+           {"--log-p0 nan", "--log-p0: 'nan' is not a finite number"},
+           {"--initial-heading-deg -inf", "--initial-heading-deg: '-inf' is not a finite number"},
+           {"--spacing " + std::string(400, '9'),
+            "--spacing: '" + std::string(80, '9') + "... (400 bytes)' is out of a double's range"},
+       }) {
+    const std::string e = error_of("{}", args);
+    EXPECT_NE(e.find(expected), std::string::npos) << args << ": " << e;
+    EXPECT_LT(e.size(), 200U) << e;
+  }
+  const std::string e = error_of(R"({"max-seconds": "nan"})");
+  EXPECT_NE(e.find("key 'max-seconds': --max-seconds: 'nan' is not a finite number"),
+            std::string::npos)
+      << e;
+}
+
 TEST_F(CommandLine, RepeatedConfigKeysEmptyOutAndTooManyThreadsAreRefused) {
   std::string e = error_of(R"({"seed": 1, "particles": 5, "seed": 2})");
   EXPECT_NE(e.find(path_ + ": key 'seed' is repeated: give each option once"), std::string::npos)

@@ -78,6 +78,17 @@ TEST_F(CsvTest, RefusesMalformedInputNamingFileLineAndReason) {
     const std::string e = error_of("");
     EXPECT_NE(e.find(":0: empty file"), std::string::npos) << e;
   }
+  {
+    // A long bad field is quoted by its first 80 bytes and its length; a NUL as \x00.
+    const std::string e = error_of("id,x_m,y_m\n1," + std::string(100'000, '7') + "x,3\n");
+    EXPECT_NE(e.find(":2: column 'x_m': '" + std::string(80, '7') +
+                     "...' (100001 bytes) is not a number"),
+              std::string::npos)
+        << e.substr(0, 300);
+    EXPECT_LT(e.size(), 300U);
+    const std::string nul = error_of(std::string("id,x_m,y_m\n1,2\0,3\n", 18));
+    EXPECT_NE(nul.find(":2: column 'x_m': '2\\x00' is not a number"), std::string::npos) << nul;
+  }
   EXPECT_THROW(CsvReader("/nonexistent/file.csv", {"a"}), std::runtime_error);
 }
 

@@ -228,6 +228,11 @@ TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
       {h + "control 1 0.1 three 0\n", "x.log:7: u0: 'three' is not a number"},
       {h + "control 1 0.1 3x 0\n", "x.log:7: u0: '3x' is not a number"},
       {h + "control 1 0.1 nan 0\n", "x.log:7: u0: 'nan' is not finite"},
+      {h + "control 1 0.1 1e400 0\n", "x.log:7: u0: '1e400' is out of a double's range"},
+      {h + "control 1 0.1 0x1p3 0\n", "x.log:7: u0: '0x1p3' is not a number"},
+      // A NUL or a control byte is quoted as \xNN, so the message is not cut short there.
+      {h + std::string("control 1 0.1 1\0 0\n", 20), "x.log:7: u0: '1\\x00' is not a number"},
+      {h + "control 1 0.1 \x1b[2J 0\n", "x.log:7: u0: '\\x1b[2J' is not a number"},
       {h + "control 1 0.1 0 inf\n", "x.log:7: u1: 'inf' is not finite"},
       {h + "control 1 -0.1 0 0\n", "x.log:7: dt is negative"},
       {h + "control 2 0.1 0 0\ncontrol 1 0.1 0 0\n", "x.log:8: time goes backwards: 1 after 2"},
@@ -378,8 +383,20 @@ TEST(LogFormat, NothingPartialAndAMissingFileIsNamed) {
   try {
     read_log("/nonexistent/dir/x.log");
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("/nonexistent/dir/x.log: cannot open"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find(
+                  "/nonexistent/dir/x.log: cannot open for reading: No such file or directory"),
+              std::string::npos);
   }
+  // A directory opens as a file on Linux; it is named as what it is, not as a read error.
+  const std::string dir = testing::temp_path("log_format_dir");
+  std::filesystem::create_directories(dir);
+  try {
+    read_log(dir);
+    ADD_FAILURE() << "a directory read as a log";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), dir + ": is a directory, not a log file");
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(LogFormat, WriterRefusesWhatWouldNotReadBack) {
