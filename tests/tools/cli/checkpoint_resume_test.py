@@ -96,10 +96,13 @@ class CheckpointResumeTest(unittest.TestCase):
         return os.path.join(self.dir, name)
 
     def reference(self, extra):
+        """The uninterrupted run; sets self.seconds to its wall time."""
         out = self.path("reference")
+        start = time.monotonic()
         r = run(["run"] + WORLD + list(extra) +
                 ["--out", out, "--trace", self.path("reference.trace")])
         self.assertEqual(r.returncode, 0, r.stderr)
+        self.seconds = time.monotonic() - start
         return out
 
     def assert_same_outputs(self, reference, resumed, trace_a, trace_b):
@@ -128,7 +131,9 @@ class CheckpointResumeTest(unittest.TestCase):
                 args += ["--resume", ckp]
             p = subprocess.Popen([FASTSLAM] + args, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.PIPE, text=True)
-            delay = rng.uniform(0.05, 0.6)
+            # Stops within the first third of a whole run's time, so a sanitizer's slower
+            # build is stopped as often as the release.
+            delay = rng.uniform(0.03, 0.3) * self.seconds
             try:
                 _, err = p.communicate(timeout=delay)
                 self.assertEqual(p.returncode, 0, err)
@@ -158,7 +163,7 @@ class CheckpointResumeTest(unittest.TestCase):
         reference = self.reference(extra)
         out, trace, ckp = self.path("run"), self.path("run.trace"), self.path("run.ckp")
         args = ["run"] + WORLD + extra + ["--out", out, "--trace", trace, "--checkpoint", ckp]
-        r = run(args + ["--max-seconds", "0.3"])
+        r = run(args + ["--max-seconds", str(0.3 * self.seconds)])
         self.assertEqual(r.returncode, 0, r.stderr)
         self.assertIn("checkpoint of scan", r.stderr)
         self.assertTrue(os.path.exists(ckp), "a run stopped by --max-seconds keeps its checkpoint")
