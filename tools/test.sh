@@ -47,7 +47,8 @@ done
 
 # The fuzzers (fuzz/): the fuzz preset, each target for FASTSLAM_FUZZ_SECONDS (30) over a copy
 # of its seed corpus (the repository is not written); any crash fails the suite.
-fuzzers=(log_format_fuzzer victoria_park_fuzzer utias_fuzzer config_json_fuzzer filter_load_fuzzer)
+fuzzers=(log_format_fuzzer victoria_park_fuzzer utias_fuzzer config_json_fuzzer filter_load_fuzzer
+  checkpoint_fuzzer)
 start=$SECONDS
 if ! fastslam_build fuzz "${fuzzers[@]}"; then
   echo "== Build of preset 'fuzz' FAILED"

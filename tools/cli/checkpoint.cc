@@ -159,18 +159,22 @@ Checkpoint read_checkpoint(const std::string& path) {
     std::fclose(file);
     if (failed) throw std::runtime_error(path + ": cannot read the checkpoint");
   }
+  return parse_checkpoint(path, bytes);
+}
+
+Checkpoint parse_checkpoint(const std::string& path, std::string_view bytes) {
   Reader r(path, bytes);
   if (bytes.size() < sizeof(kMagic) || std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0) {
     r.fail("no checkpoint magic (not written by fastslam run --checkpoint)");
   }
   if (bytes.size() < sizeof(kMagic) + 4 + kDigest) r.fail("truncated");
   Sha256 hash;
-  hash.update(std::string_view(bytes).substr(0, bytes.size() - kDigest));
+  hash.update(bytes.substr(0, bytes.size() - kDigest));
   const Sha256::Digest digest = hash.finish();
   if (std::memcmp(digest.data(), bytes.data() + bytes.size() - kDigest, kDigest) != 0) {
     r.fail("its SHA-256 does not match (a torn or altered file)");
   }
-  Reader body(path, std::string_view(bytes).substr(0, bytes.size() - kDigest));
+  Reader body(path, bytes.substr(0, bytes.size() - kDigest));
   body.get<std::array<char, sizeof(kMagic)>>("magic");
   if (const auto version = body.get<std::uint32_t>("version"); version != kCheckpointVersion) {
     body.fail("format version " + std::to_string(version) + ", this build reads version " +

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -49,6 +50,8 @@ void write_checkpoint(const std::string& path, const Checkpoint& c, const engine
 // Reads and checks a checkpoint: magic, version, section sizes against the file's, the hash and
 // the header's fields. Throws std::runtime_error "PATH: ..." saying what is wrong.
 Checkpoint read_checkpoint(const std::string& path);
+// As read_checkpoint on a file's bytes; `name` is the file's, for messages.
+Checkpoint parse_checkpoint(const std::string& name, std::string_view bytes);
 
 // The identity of a run: the build (tools/cli/build_info.h), its options
 // (tools/cli/run_provenance.h resolved_options_json) without those that change no result
