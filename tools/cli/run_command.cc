@@ -544,6 +544,7 @@ nlohmann::json run_once(const RunOptions& options) {
     engine::Filter filter(config);
     drive(filter, loop, r);
   }
+  for (const std::string& w : source->warnings()) warn_once(r, w);
   r.trajectories = recorder.finish();
   // Every file that could not be written; the first is the run's failure.
   std::vector<std::string> errors = r.trajectories.errors;
@@ -646,8 +647,10 @@ int convert_to_log(const RunOptions& options) {
     if (file.failed()) file.flush();  // throws naming the file and the reason
     ++events;
   }
+  writer.finish();
   file.commit();
   std::printf("wrote %zu events to %s\n", events, options.out.c_str());
+  for (const std::string& w : source->warnings()) std::fprintf(stderr, "warning: %s\n", w.c_str());
   return 0;
 }
 

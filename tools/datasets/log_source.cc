@@ -18,6 +18,7 @@ LogSource::LogSource(Log log, std::string name, std::string summary,
   info_.name = std::move(name);
   info_.summary = std::move(summary);
   info_.metrics = std::move(metrics);
+  if (log_.unterminated) warnings_.push_back(unterminated_log_warning(info_.name));
 }
 
 bool LogSource::next(Event& e, std::vector<engine::Observation>& scan) {

@@ -84,9 +84,14 @@ class Source {
   // Where event `index` (from 0, in the order `next` gave them) came from, for messages:
   // "NAME, event INDEX", or the file and line where the source knows them.
   virtual std::string where(std::uint64_t index) const;
+  // What is wrong with the input without stopping the run (a log without its end marker), one
+  // message each. A source may find one only at its end (a pipe), so a run reads them after its
+  // last event; metrics.json and stderr report them.
+  const std::vector<std::string>& warnings() const noexcept { return warnings_; }
 
  protected:
   SourceInfo info_;
+  std::vector<std::string> warnings_;
 };
 
 struct SourceEntry {

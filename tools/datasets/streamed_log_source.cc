@@ -18,8 +18,7 @@ std::unique_ptr<std::istream> open_file(const std::string& path) {
 
 }  // namespace
 
-StreamedLogSource::StreamedLogSource(const std::string& path)
-    : name_(path == "-" ? kStdin : path) {
+StreamedLogSource::StreamedLogSource(const std::string& path) : name_(path == "-" ? kStdin : path) {
   info_.name = name_;
   Event e;
   std::vector<engine::Observation> scan;
@@ -37,6 +36,7 @@ StreamedLogSource::StreamedLogSource(const std::string& path)
     }
     info_.labels = labels_of(labelled, observations);
     info_.landmarks = check.landmarks();
+    if (!check.ended()) warnings_.push_back(unterminated_log_warning(name_));
     file_ = open_file(path);
     reader_ = std::make_unique<LogReader>(*file_, name_);
     info_.header = reader_->header();
@@ -72,7 +72,13 @@ bool StreamedLogSource::next(Event& event, std::vector<engine::Observation>& sca
     ++index_;
     return true;
   }
-  if (!reader_->next(event, scan)) return false;
+  if (!reader_->next(event, scan)) {
+    // A pipe's end tells whether it was whole; a file's first pass has said so already.
+    if (file_ == nullptr && !reader_->ended() && warnings_.empty()) {
+      warnings_.push_back(unterminated_log_warning(name_));
+    }
+    return false;
+  }
   line_ = reader_->line();
   ++index_;
   if (file_ == nullptr && reader_->landmarks().size() != landmarks_known_) {
