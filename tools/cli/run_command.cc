@@ -22,6 +22,7 @@
 #include "engine/filter.h"
 #include "tools/cli/build_info.h"
 #include "tools/cli/interrupt.h"
+#include "tools/cli/memory_budget.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
 #include "tools/cli/run_provenance.h"
@@ -520,6 +521,7 @@ nlohmann::json run_once(const RunOptions& options) {
       resolve_association(options.association, info, entry.defaults);
   const RunOptions resolved = resolve_options(options, info, association);
   const engine::FilterConfig config = filter_config(resolved, info.header);
+  const MemoryEstimate memory = check_memory_budget(config, info, options.max_memory);
   const bool ekf = config.algorithm == engine::Algorithm::kEkf;
   const std::uint32_t particles = ekf ? 1 : config.particles;
   ProgressBar progress(options.progress);
@@ -567,6 +569,7 @@ nlohmann::json run_once(const RunOptions& options) {
   metrics["schema_version"] = kMetricsSchemaVersion;
   metrics["build"] = build_info_json();
   metrics["options"] = resolved_options_json(resolved, config, association.mode);
+  metrics["memory_estimate_bytes"] = memory.bytes;
   if (options.hash_inputs) metrics["inputs"] = std::move(inputs);
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;

@@ -128,6 +128,7 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"stream", path_or_null(o.stream)},
       {"max-steps", or_null(o.max_steps)},
       {"max-seconds", or_null(o.max_seconds)},
+      {"max-memory", o.max_memory},
       {"no-progress", !o.progress},
       {"no-plot", o.plot_script.empty()},
   };

@@ -11,7 +11,12 @@ LogSource::LogSource(Log log, std::string name, std::string summary,
     : log_(std::move(log)) {
   info_.header = log_.header;
   info_.landmarks = log_.landmarks;
-  for (const Event& e : log_.events) info_.expected_controls += e.kind == EventKind::kControl;
+  ScanShapeCounter shape;
+  for (const Event& e : log_.events) {
+    info_.expected_controls += e.kind == EventKind::kControl;
+    shape.add(e);
+  }
+  info_.scans = shape.shape(true);
   std::size_t labelled = 0;
   for (const engine::Observation& z : log_.observations) labelled += z.id >= 0;
   info_.labels = labels_of(labelled, log_.observations.size());

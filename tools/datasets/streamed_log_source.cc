@@ -27,14 +27,17 @@ StreamedLogSource::StreamedLogSource(const std::string& path) : name_(path == "-
     const std::unique_ptr<std::istream> first = open_file(path);
     LogReader check(*first, name_);
     std::size_t labelled = 0, observations = 0;
+    ScanShapeCounter shape;
     while (check.next(e, scan)) {
       info_.expected_controls += e.kind == EventKind::kControl;
+      shape.add(e);
       observations += scan.size() * (e.kind == EventKind::kScan);
       if (e.kind == EventKind::kScan) {
         for (const engine::Observation& z : scan) labelled += z.id >= 0;
       }
     }
     info_.labels = labels_of(labelled, observations);
+    info_.scans = shape.shape(true);
     info_.landmarks = check.landmarks();
     if (!check.ended()) warnings_.push_back(unterminated_log_warning(name_));
     file_ = open_file(path);
@@ -47,8 +50,15 @@ StreamedLogSource::StreamedLogSource(const std::string& path) : name_(path == "-
   reader_ = std::make_unique<LogReader>(std::cin, name_);
   info_.header = reader_->header();
   info_.labels = Labels::kNone;  // until a scan with detections says otherwise
-  while (ahead_.size() < kLookahead && reader_->next(e, scan)) {
+  ScanShapeCounter shape;
+  bool whole = false;  // the stream ended within the look-ahead
+  while (ahead_.size() < kLookahead) {
+    if (!reader_->next(e, scan)) {
+      whole = true;
+      break;
+    }
     ahead_.push_back({e, scan, reader_->line()});
+    shape.add(e);
     if (e.kind == EventKind::kScan && !scan.empty()) {
       std::size_t labelled = 0;
       for (const engine::Observation& z : scan) labelled += z.id >= 0;
@@ -56,6 +66,7 @@ StreamedLogSource::StreamedLogSource(const std::string& path) : name_(path == "-
       break;
     }
   }
+  info_.scans = shape.shape(whole);  // else the stream's first scans only
   info_.landmarks = reader_->landmarks();
   landmarks_known_ = info_.landmarks.size();
 }
