@@ -1,6 +1,7 @@
 // Writes the fuzzers' seed corpora into <dir>/<target>/: valid small inputs made by the
-// project's own writers (a short log, JSON configurations, saved states of small filters).
-// fuzz/make_corpus.sh runs it and adds a few rows of each data set for the dataset readers.
+// project's own writers (a short log with and without its end marker, JSON configurations, saved
+// states of small filters). fuzz/make_corpus.sh runs it and adds a few rows of each data set for
+// the dataset readers.
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -78,7 +79,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path root = argv[1];
-  write(root / "log_format_fuzzer", "small.log", small_log());
+  const std::string log = small_log();
+  write(root / "log_format_fuzzer", "small.log", log);
+  // The same cut before its end marker, as a log written before the marker existed.
+  write(root / "log_format_fuzzer", "small_unterminated.log", log.substr(0, log.rfind("end ")));
 
   engine::FilterConfig json_config;
   write(root / "config_json_fuzzer", "default.json", bindings::config_to_json(json_config));

@@ -94,6 +94,7 @@ struct PyLog {
   std::string motion;
   py::dict config;
   py::array events, observations, landmarks;
+  bool unterminated = false;
 };
 
 PyLog to_python(const tools::Log& log) {
@@ -126,6 +127,7 @@ PyLog to_python(const tools::Log& log) {
   TruthRecord* l = landmarks.mutable_data();
   for (const tools::TruthLandmark& t : log.landmarks) *l++ = {t.id, t.x, t.y};
   out.landmarks = std::move(landmarks);
+  out.unterminated = log.unterminated;
   return out;
 }
 
@@ -176,7 +178,8 @@ Attributes: start_time, start_pose (x, y, theta), motion (the model's name), con
 configuration dict holding the header's motion and sensor models and the start pose), events
 (structured array in file order: time, kind (fastslam.EventKind), count, first, dt, u0, u1, x,
 y, theta), observations (range, bearing, id; a scan's are observations[first:first + count]),
-landmarks (the true landmarks: id, x, y). records() iterates the events as tuples.)doc")
+landmarks (the true landmarks: id, x, y), unterminated (True when the file ended without its end
+marker: it may be truncated). records() iterates the events as tuples.)doc")
       .def_readonly("start_time", &PyLog::start_time)
       .def_readonly("start_pose", &PyLog::start_pose)
       .def_readonly("motion", &PyLog::motion)
@@ -184,6 +187,7 @@ landmarks (the true landmarks: id, x, y). records() iterates the events as tuple
       .def_readonly("events", &PyLog::events)
       .def_readonly("observations", &PyLog::observations)
       .def_readonly("landmarks", &PyLog::landmarks)
+      .def_readonly("unterminated", &PyLog::unterminated)
       .def("__len__", [](const PyLog& log) { return log.events.size(); })
       .def("__repr__", [](const PyLog& log) {
         return "fastslam.Log(motion='" + log.motion +

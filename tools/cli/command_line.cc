@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/enum_names.h"
+#include "tools/cli/memory_budget.h"
 #include "tools/cli/run_sweep.h"
 
 namespace fastslam::tools {
@@ -584,6 +585,11 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--max-seconds", w.max_seconds,
                  "stop after this much wall time and report what the run has (default: none)")
       ->check(positive_number());
+  cmd.add_option("--max-memory", o.max_memory,
+                 "refuse the run up front when its filter is estimated to need more memory than "
+                 "this: bytes, or 512M, 4G, ... (default 0: what the machine has available)")
+      ->transform(CLI::Validator([](std::string& text) { return memory_size_check(text); }, "SIZE",
+                                 "memory size"));
   cmd.add_option("--trace-every", o.trace_every, "scans between --trace rows")
       ->check(whole_number<std::uint64_t>())
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40))

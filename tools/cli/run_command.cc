@@ -23,6 +23,7 @@
 #include "tools/cli/build_info.h"
 #include "tools/cli/checkpoint.h"
 #include "tools/cli/interrupt.h"
+#include "tools/cli/memory_budget.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
 #include "tools/cli/run_provenance.h"
@@ -706,6 +707,7 @@ nlohmann::json run_once(const RunOptions& options) {
   const RunOptions resolved = resolve_options(options, info, association);
   const engine::FilterConfig config = filter_config(resolved, info.header);
   engine::validate(config);
+  const MemoryEstimate memory = check_memory_budget(config, info, options.max_memory);
   // The source opened and the settings accepted: only now does the run replace an earlier
   // one's files, so a run refused for its input or options leaves them as they were.
   if (!options.out.empty()) clear_earlier_run(options.out, kRunFileNames);
@@ -757,6 +759,7 @@ nlohmann::json run_once(const RunOptions& options) {
     engine::Filter filter(config);
     drive(filter, loop, r);
   }
+  for (const std::string& w : source->warnings()) warn_once(r, w);
   r.trajectories = recorder.finish();
   // Every file that could not be written; the first is the run's failure.
   std::vector<std::string> errors = r.trajectories.errors;
@@ -779,6 +782,7 @@ nlohmann::json run_once(const RunOptions& options) {
   metrics["schema_version"] = kMetricsSchemaVersion;
   metrics["build"] = build_info_json();
   metrics["options"] = resolved_options_json(resolved, config, association.mode);
+  metrics["memory_estimate_bytes"] = memory.bytes;
   if (options.hash_inputs) metrics["inputs"] = inputs;
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;
@@ -865,8 +869,10 @@ int convert_to_log(const RunOptions& options) {
     if (file.failed()) file.flush();  // throws naming the file and the reason
     ++events;
   }
+  writer.finish();
   file.commit();
   std::printf("wrote %zu events to %s\n", events, options.out.c_str());
+  for (const std::string& w : source->warnings()) std::fprintf(stderr, "warning: %s\n", w.c_str());
   return 0;
 }
 

@@ -83,6 +83,9 @@ struct RunOptions {
   // --seeds: the run once per seed (tools/cli/run_sweep.h); empty: once, with filter.seed.
   std::vector<std::uint64_t> seeds;
   std::optional<double> max_seconds;
+  // The run is refused before its filter is built when the filter's estimated memory
+  // (tools/cli/memory_budget.h) exceeds this many bytes; 0: what the machine has available.
+  std::uint64_t max_memory = 0;
   // "odometry": the source's motion model with its controls; "none": the controls are ignored
   // (only their dt is used) and the pose follows the Brownian velocity model of eq. 79-81
   // (engine::MotionKind::kBrownian), with `no_odometry_sigma` (the per-control increments of v,

@@ -131,6 +131,7 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"max-seconds", or_null(o.max_seconds)},
       {"checkpoint", path_or_null(o.checkpoint)},
       {"checkpoint-every", o.checkpoint_every},
+      {"max-memory", o.max_memory},
       {"no-progress", !o.progress},
       {"no-plot", o.plot_script.empty()},
   };

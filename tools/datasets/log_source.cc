@@ -11,13 +11,19 @@ LogSource::LogSource(Log log, std::string name, std::string summary,
     : log_(std::move(log)) {
   info_.header = log_.header;
   info_.landmarks = log_.landmarks;
-  for (const Event& e : log_.events) info_.expected_controls += e.kind == EventKind::kControl;
+  ScanShapeCounter shape;
+  for (const Event& e : log_.events) {
+    info_.expected_controls += e.kind == EventKind::kControl;
+    shape.add(e);
+  }
+  info_.scans = shape.shape(true);
   std::size_t labelled = 0;
   for (const engine::Observation& z : log_.observations) labelled += z.id >= 0;
   info_.labels = labels_of(labelled, log_.observations.size());
   info_.name = std::move(name);
   info_.summary = std::move(summary);
   info_.metrics = std::move(metrics);
+  if (log_.unterminated) warnings_.push_back(unterminated_log_warning(info_.name));
 }
 
 bool LogSource::next(Event& e, std::vector<engine::Observation>& scan) {

@@ -19,7 +19,8 @@ namespace fastslam::tools {
 class LogSource final : public Source {
  public:
   // `name` is the info's name (the file or directory read); `summary` the line convert prints;
-  // `metrics` go to metrics.json as they are.
+  // `metrics` go to metrics.json as they are. A log read without its end marker
+  // (Log::unterminated) is run with a warning (Source::warnings).
   LogSource(Log log, std::string name, std::string summary = {},
             std::vector<std::pair<std::string, double>> metrics = {});
   bool next(Event& event, std::vector<engine::Observation>& scan) override;

@@ -9,6 +9,7 @@
 // Costs: `next` is O(observations of the event); opening costs what reading the data costs.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -58,12 +59,45 @@ constexpr Labels labels_of(std::size_t labelled, std::size_t detections) {
   return labelled == detections ? Labels::kAll : labelled == 0 ? Labels::kNone : Labels::kSome;
 }
 
+// The largest scan a source holds, as it can tell before it runs: what the filter's per-scan
+// buffers grow to (tools/cli/memory_budget.h).
+struct ScanShape {
+  std::uint64_t controls = 0;    // the most controls before one scan (queued, then run with it)
+  std::uint64_t detections = 0;  // the most detections in one scan
+  // False: only what the source has seen so far (a pipe's first records), a lower bound.
+  bool known = false;
+};
+
+// Walks a source's events to its ScanShape: `add` each event in order, then `shape`.
+class ScanShapeCounter {
+ public:
+  void add(const Event& event) {
+    if (event.kind == EventKind::kControl) ++run_;
+    if (event.kind != EventKind::kScan) return;
+    shape_.controls = std::max(shape_.controls, run_);
+    shape_.detections = std::max<std::uint64_t>(shape_.detections, event.count);
+    run_ = 0;
+  }
+  // The controls after the last scan count too: the filter runs them at the end.
+  ScanShape shape(bool known) const {
+    ScanShape s = shape_;
+    s.controls = std::max(s.controls, run_);
+    s.known = known;
+    return s;
+  }
+
+ private:
+  ScanShape shape_;
+  std::uint64_t run_ = 0;
+};
+
 // What a source knows before its first event.
 struct SourceInfo {
   Labels labels = Labels::kAll;
   LogHeader header;
   std::vector<TruthLandmark> landmarks;  // empty when the source has no true map
   double expected_controls = 0.0;        // for the progress bar; 0: unknown
+  ScanShape scans;                       // the largest scan (for a simulator: expected)
   std::string name;                      // "world" in metrics.json
   bool simulated = false;                // its time is the simulator's, not reading's
   std::vector<std::pair<std::string, double>> metrics;  // added to metrics.json as they are
@@ -84,9 +118,14 @@ class Source {
   // Where event `index` (from 0, in the order `next` gave them) came from, for messages:
   // "NAME, event INDEX", or the file and line where the source knows them.
   virtual std::string where(std::uint64_t index) const;
+  // What is wrong with the input without stopping the run (a log without its end marker), one
+  // message each. A source may find one only at its end (a pipe), so a run reads them after its
+  // last event; metrics.json and stderr report them.
+  const std::vector<std::string>& warnings() const noexcept { return warnings_; }
 
  protected:
   SourceInfo info_;
+  std::vector<std::string> warnings_;
 };
 
 struct SourceEntry {

@@ -11,8 +11,7 @@ constexpr const char* kStdin = "<stdin>";
 
 }  // namespace
 
-StreamedLogSource::StreamedLogSource(const std::string& path)
-    : name_(path == "-" ? kStdin : path) {
+StreamedLogSource::StreamedLogSource(const std::string& path) : name_(path == "-" ? kStdin : path) {
   info_.name = name_;
   Event e;
   std::vector<engine::Observation> scan;
@@ -21,15 +20,19 @@ StreamedLogSource::StreamedLogSource(const std::string& path)
     const std::unique_ptr<std::istream> first = open_log_file(path);
     LogReader check(*first, name_);
     std::size_t labelled = 0, observations = 0;
+    ScanShapeCounter shape;
     while (check.next(e, scan)) {
       info_.expected_controls += e.kind == EventKind::kControl;
+      shape.add(e);
       observations += scan.size() * (e.kind == EventKind::kScan);
       if (e.kind == EventKind::kScan) {
         for (const engine::Observation& z : scan) labelled += z.id >= 0;
       }
     }
     info_.labels = labels_of(labelled, observations);
+    info_.scans = shape.shape(true);
     info_.landmarks = check.landmarks();
+    if (!check.ended()) warnings_.push_back(unterminated_log_warning(name_));
     file_ = open_log_file(path);
     reader_ = std::make_unique<LogReader>(*file_, name_);
     info_.header = reader_->header();
@@ -40,8 +43,15 @@ StreamedLogSource::StreamedLogSource(const std::string& path)
   reader_ = std::make_unique<LogReader>(std::cin, name_);
   info_.header = reader_->header();
   info_.labels = Labels::kNone;  // until a scan with detections says otherwise
-  while (ahead_.size() < kLookahead && reader_->next(e, scan)) {
+  ScanShapeCounter shape;
+  bool whole = false;  // the stream ended within the look-ahead
+  while (ahead_.size() < kLookahead) {
+    if (!reader_->next(e, scan)) {
+      whole = true;
+      break;
+    }
     ahead_.push_back({e, scan, reader_->line()});
+    shape.add(e);
     if (e.kind == EventKind::kScan && !scan.empty()) {
       std::size_t labelled = 0;
       for (const engine::Observation& z : scan) labelled += z.id >= 0;
@@ -49,6 +59,7 @@ StreamedLogSource::StreamedLogSource(const std::string& path)
       break;
     }
   }
+  info_.scans = shape.shape(whole);  // else the stream's first scans only
   info_.landmarks = reader_->landmarks();
   landmarks_known_ = info_.landmarks.size();
 }
@@ -65,7 +76,13 @@ bool StreamedLogSource::next(Event& event, std::vector<engine::Observation>& sca
     ++index_;
     return true;
   }
-  if (!reader_->next(event, scan)) return false;
+  if (!reader_->next(event, scan)) {
+    // A pipe's end tells whether it was whole; a file's first pass has said so already.
+    if (file_ == nullptr && !reader_->ended() && warnings_.empty()) {
+      warnings_.push_back(unterminated_log_warning(name_));
+    }
+    return false;
+  }
   line_ = reader_->line();
   ++index_;
   if (file_ == nullptr && reader_->landmarks().size() != landmarks_known_) {

@@ -6,7 +6,9 @@
 // streams. A pipe cannot be read twice: the source reads ahead to the first scan with
 // detections and takes the labels from it (all carry ids: known association under `auto`);
 // truth landmarks must precede the first event; and a malformed record ends the stream where it
-// is, with the error "<stdin>:<line>: <reason>" from `next`, after the events before it.
+// is, with the error "<stdin>:<line>: <reason>" from `next`, after the events before it. A log
+// without its end marker runs with a warning (Source::warnings): a file's from the first pass,
+// a pipe's once `next` reached its end.
 //
 // Ownership: owns the file it opens; borrows standard input. Thread safety: thread-compatible.
 // Costs: O(record) per event; a file's first pass reads it whole once.
@@ -48,10 +50,10 @@ class StreamedLogSource final : public Source {
   std::string name_;
   std::unique_ptr<std::istream> file_;  // null for standard input
   std::unique_ptr<LogReader> reader_;
-  std::deque<Ahead> ahead_;             // a pipe's events read ahead
-  std::size_t landmarks_known_ = 0;     // truth landmarks in info_
-  std::uint64_t index_ = 0;             // events given so far
-  std::uint64_t line_ = 0;              // the line of the last one
+  std::deque<Ahead> ahead_;          // a pipe's events read ahead
+  std::size_t landmarks_known_ = 0;  // truth landmarks in info_
+  std::uint64_t index_ = 0;          // events given so far
+  std::uint64_t line_ = 0;           // the line of the last one
 };
 
 }  // namespace fastslam::tools

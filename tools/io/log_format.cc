@@ -97,6 +97,21 @@ class LogReader::Parser {
             std::vector<TruthLandmark>& landmarks) {
     while (next_line()) {
       const std::string_view record = tokens_[0];
+      if (end_line_ != 0) {
+        fail(quoted(record) + " after the end marker (line " + std::to_string(end_line_) +
+             "): the log ends there");
+      }
+      if (record == "end") {
+        fields(2, "end RECORDS");
+        const std::uint64_t said = integer(1, "record count");
+        if (said != records_) {
+          fail("the end marker counts " + std::to_string(said) + " records, but the log has " +
+               std::to_string(records_) + " before it: records were lost or added");
+        }
+        end_line_ = line_;
+        continue;
+      }
+      ++records_;
       if (record == "landmark") {
         fields(4, "landmark ID X Y");
         TruthLandmark l{integer(1, "landmark id"), number(2, "x"), number(3, "y")};
@@ -148,7 +163,7 @@ class LogReader::Parser {
         e.x = number(2, "x");
         e.y = number(3, "y");
       } else {
-        fail("unknown record " + quoted(record) + " (control, scan, pose, gps or landmark)");
+        fail("unknown record " + quoted(record) + " (control, scan, pose, gps, landmark or end)");
       }
       e.time = number(1, "time");
       if (e.time < last_time_) {
@@ -162,6 +177,7 @@ class LogReader::Parser {
   }
 
   std::uint64_t line() const noexcept { return line_; }
+  bool ended() const noexcept { return end_line_ != 0; }
 
  private:
   void read_header(LogHeader& h) {
@@ -350,6 +366,8 @@ class LogReader::Parser {
   std::uint64_t line_ = 0;
   double last_time_ = 0.0;
   std::unordered_set<std::uint64_t> landmark_ids_;
+  std::uint64_t records_ = 0;   // after the header, landmarks included
+  std::uint64_t end_line_ = 0;  // the end marker's line; 0 until it is read
 };
 
 namespace {
@@ -417,6 +435,14 @@ bool LogReader::next(Event& event, std::vector<engine::Observation>& scan) {
   return true;
 }
 
+bool LogReader::ended() const noexcept { return parser_->ended(); }
+
+std::string unterminated_log_warning(const std::string& name) {
+  return name +
+         ": the log has no end marker ('end N'), so it may be truncated; regenerate it from its "
+         "data with `fastslam convert`, which ends it with one (docs/log-format.md)";
+}
+
 Log read_log(std::istream& in, const std::string& name) {
   LogReader reader(in, name);
   Log log;
@@ -432,6 +458,7 @@ Log read_log(std::istream& in, const std::string& name) {
     log.lines.push_back(reader.line());
   }
   log.landmarks = reader.landmarks();
+  log.unterminated = !reader.ended();
   return log;
 }
 
@@ -506,15 +533,31 @@ LogWriter::LogWriter(std::ostream& out, const LogHeader& h) : out_(out), last_ti
   out_ << l;
 }
 
+void LogWriter::open_record() {
+  if (finished_) throw std::logic_error("LogWriter: a record after finish()");
+  ++records_;
+}
+
+void LogWriter::finish() {
+  if (finished_) throw std::logic_error("LogWriter: finish() twice");
+  finished_ = true;
+  line_ = "end";
+  put(line_, records_);
+  line_ += '\n';
+  out_ << line_;
+}
+
 void LogWriter::stamp(double time) {
   require_finite(time, "time");
   if (time < last_time_) throw std::invalid_argument("LogWriter: time goes backwards");
+  open_record();
   last_time_ = time;
 }
 
 void LogWriter::landmark(const TruthLandmark& m) {
   require_finite(m.x, "landmark x");
   require_finite(m.y, "landmark y");
+  open_record();
   line_ = "landmark";
   put(line_, m.id);
   put(line_, m.x);
@@ -605,6 +648,7 @@ void write_log(std::ostream& out, const Log& log) {
   LogWriter writer(out, log.header);
   for (const TruthLandmark& m : log.landmarks) writer.landmark(m);
   for (const Event& e : log.events) writer.event(log, e);
+  writer.finish();
 }
 
 void write_log(const std::string& path, const Log& log) {

@@ -1,6 +1,6 @@
 // The native log reader (tools/io/log_format.h) on arbitrary bytes: a refusal is
 // std::runtime_error; an accepted log writes and reads back equal; the streaming reader
-// (LogReader) accepts the same logs and returns the same events.
+// (LogReader) accepts the same logs, returns the same events and agrees on the end marker.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -38,6 +38,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       ++streamed;
     }
     streamed_all = true;
+    if (read && log.unterminated == reader.ended()) std::abort();  // disagree on the end
   } catch (const std::runtime_error&) {
   }
   if (read != streamed_all || (read && streamed != log.events.size())) std::abort();

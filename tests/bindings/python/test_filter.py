@@ -22,6 +22,19 @@ def config(loop_log):
     return fastslam.run_config(loop_log, particles=20, seed=3)
 
 
+def test_a_log_cut_before_its_end_marker_reads_and_runs_with_a_warning(tmp_path, loop_log):
+    text = loop_log.read_text()
+    cut = tmp_path / "cut.log"
+    cut.write_text(text[:text.rindex("end ")])
+    log = fastslam.read_log(cut)
+    assert log.unterminated
+    assert len(log) == len(fastslam.read_log(loop_log))
+    metrics = fastslam.run(cut, particles=5, max_steps=50)
+    assert [w for w in metrics["warnings"] if "no end marker" in w] == [
+        f"{cut}: the log has no end marker ('end N'), so it may be truncated; regenerate it from "
+        "its data with `fastslam convert`, which ends it with one (docs/log-format.md)"]
+
+
 def test_read_log(log):
     kinds = log.events["kind"]
     assert log.motion == "bailey-car"
@@ -37,6 +50,7 @@ def test_read_log(log):
     assert scans["count"].sum() == len(log.observations)
     assert np.all(np.diff(log.events["time"]) >= 0)
     assert "events=" in repr(log)
+    assert not log.unterminated  # convert ends the log with its end marker
     records = list(log.records())
     assert len(records) == len(log.events)
     scan = next(r for r in records if isinstance(r, fastslam.Scan) and len(r.ranges) > 0)

@@ -5,8 +5,9 @@ A table of cases, each a command (with files it makes first), the exit code it m
 fragments its standard error must hold, and a bound on its time: out-of-range integers refused
 rather than clamped or wrapped, `--out ""`, too many threads, a repeated --config key, input
 that is not a log (/dev/zero, a long token) stopped within the line limit, an engine error
-naming the record and the scan. Then `--version`, metrics.json's provenance (its input hashes
-recomputed here with hashlib) and sweep.json's, once.
+naming the record and the scan, a run whose filter would not fit in memory refused at once with
+its figure. Then the memory estimate against a run's measured peak, `--version`, metrics.json's
+provenance (its input hashes recomputed here with hashlib) and sweep.json's, once.
 
 Usage: cli_limits_test.py FASTSLAM_BINARY
 """
@@ -60,6 +61,22 @@ CASES = [
       "--no-progress", "--no-plot"],
      {"dup.log": DUPLICATE}, 1,
      ["dup.log:10 (scan 2, t = 0.200 s): ", "landmark id 3 appears twice in one scan"], 10),
+    # 10^7 particles on the built-in stress world once died of std::bad_alloc after 14 s at
+    # 9.3 GB; now refused before the filter is built.
+    ("particles beyond --max-memory",
+     ["run", "--particles", "10000000", "--max-memory", "1G", "--no-progress", "--no-plot"],
+     {}, 1,
+     ["fastslam: error: --particles 10000000: the filter needs about ", " GiB (",
+      " KiB per particle, for scans of 40 controls and ",
+      "17.2 MiB for a map of 100000 landmarks), more than the 1.0 GiB allowed by --max-memory: "
+      "use fewer particles or raise --max-memory"], 5),
+    ("particles beyond the machine",
+     ["run", "--particles", "100000000", "--no-progress", "--no-plot"], {}, 1,
+     ["--particles 100000000: the filter needs about ", "or give --max-memory SIZE to run anyway"],
+     5),
+    ("--max-memory not a size", ["run", "--max-memory", "4X"], {}, 105,
+     ["--max-memory: '4X' is not a size (unknown unit): give bytes, or a number with K, M, G or "
+      "T (512M, 4G)"], 5),
 ]
 
 
@@ -89,6 +106,28 @@ class Limits(unittest.TestCase):
                 # Messages quote bad input briefly, whatever its size.
                 self.assertLess(len(r.stderr), 1000, r.stderr[:2000])
                 self.assertLess(took, seconds)
+
+
+class Memory(unittest.TestCase):
+    def test_a_run_that_fits_runs_and_its_estimate_follows_the_measured_peak(self):
+        """The estimate's growth from 1 to 2000 particles against peak RSS's (fastslam1, known
+        ids, the stress world's density: the case memory_budget.cc measured)."""
+        peaks = {}
+        with tempfile.TemporaryDirectory() as d:
+            for particles in [1, 2000]:
+                out = os.path.join(d, str(particles))
+                r = run(["run", "--world", "grid", "--landmarks", "10000", "--max-steps", "2000",
+                         "--particles", str(particles), "--threads", "1", "--max-memory", "1G",
+                         "--no-progress", "--no-plot", "--out", out])
+                self.assertEqual(r.returncode, 0, r.stderr)
+                with open(os.path.join(out, "metrics.json")) as f:
+                    m = json.load(f)
+                self.assertEqual(m["options"]["max-memory"], 1 << 30)
+                peaks[particles] = (m["peak_rss_bytes"], m["memory_estimate_bytes"])
+        measured = peaks[2000][0] - peaks[1][0]
+        estimated = peaks[2000][1] - peaks[1][1]
+        self.assertGreater(estimated / measured, 0.67, peaks)
+        self.assertLess(estimated / measured, 1.5, peaks)
 
 
 class Provenance(unittest.TestCase):

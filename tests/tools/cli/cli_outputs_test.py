@@ -8,7 +8,9 @@ files removed and nothing else; SIGINT and SIGTERM mid-run (exit 130 / 143, "sta
 "interrupted", the trajectory so far well formed); a second SIGINT killing at once; a full disk
 (a 64 KiB tmpfs, root only: skipped otherwise) ending with "status": "failed: ...", no
 temporaries; an evaluation problem kept as a warning; convert through a symlink, refusing a
-device, a link to one and a directory, and leaving nothing when stopped.
+device, a link to one and a directory, and leaving nothing when stopped; the end marker convert
+writes, a log cut before it run with a warning (from a file and from a pipe), a record after it
+refused.
 
 Usage: cli_outputs_test.py FASTSLAM_BINARY
 """
@@ -29,7 +31,8 @@ HEADER = ("fastslam-log 1\nmotion unicycle\ncontrol_noise 0.1 0.1\n"
           "sensor 0.1 0.01 30 3.14159 0 0 0\nstart 0 0 0 0\nend_header\n")
 # Scans see landmark 7, which the landmark lines do not have.
 UNKNOWN_ID = HEADER + ("landmark 3 5 0\ncontrol 0.1 0.1 1 0\nscan 0.1 1 5 0.1 3\n"
-                       "control 0.2 0.1 1 0\nscan 0.2 2 5 0.1 3 6 0.2 7\n")
+                       "control 0.2 0.1 1 0\nscan 0.2 2 5 0.1 3 6 0.2 7\nend 5\n")
+NO_END_WARNING = "the log has no end marker ('end N'), so it may be truncated"
 SMALL = ["--world", "grid", "--landmarks", "100", "--max-steps", "20", "--no-progress",
          "--no-plot"]
 # The built-in stress run, long enough to be stopped.
@@ -315,6 +318,78 @@ class Convert(unittest.TestCase):
             self.assertEqual(p.returncode, 130, stderr)
             self.assertIn("SIGINT: stopped; " + out + " left as it was", stderr)
             self.assertEqual(os.listdir(d), [])
+
+
+class EndMarker(unittest.TestCase):
+    def test_convert_ends_the_log_and_a_cut_log_runs_with_a_warning(self):
+        with tempfile.TemporaryDirectory() as d:
+            log = os.path.join(d, "loop.log")
+            r = run(["convert", "--world", "loop", "--loop-length", "200", "--out", log])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            with open(log) as f:
+                text = f.read()
+            lines = text.split("\n")
+            records = [l for l in lines[lines.index("end_header") + 1:-2] if l and l[0] != "#"]
+            self.assertEqual(lines[-2], "end %d" % len(records))
+            self.assertEqual(lines[-1], "")
+            args = ["--no-progress", "--no-plot", "--max-steps", "200"]
+
+            whole = os.path.join(d, "whole")
+            r = run(["run", "--source", "log", "--data", log, "--out", whole] + args)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertNotIn(NO_END_WARNING, r.stderr)
+            self.assertEqual(read_metrics(whole)["warnings"], [])
+
+            cut = os.path.join(d, "cut.log")
+            with open(cut, "w") as f:
+                f.write(text[:text.rindex("end ")])
+            warning = (cut + ": " + NO_END_WARNING + "; regenerate it from its data with "
+                       "`fastslam convert`, which ends it with one (docs/log-format.md)")
+            out = os.path.join(d, "cut")
+            r = run(["run", "--source", "log", "--data", cut, "--out", out] + args)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertIn("warning: " + warning + "\n", r.stderr)
+            m = read_metrics(out)
+            self.assertEqual(m["status"], "complete")
+            self.assertEqual(m["warnings"], [warning])
+            # The same run otherwise.
+            with open(os.path.join(out, "trajectory.csv")) as f1, \
+                    open(os.path.join(whole, "trajectory.csv")) as f2:
+                self.assertEqual(f1.read(), f2.read())
+
+            # From a pipe, the warning comes at its end (a run stopped before it cannot tell).
+            piped = ["run", "--source", "log", "--data", "-", "--no-progress", "--no-plot"]
+            r = run(piped, input=text[:text.rindex("end ")])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertIn("warning: <stdin>: " + NO_END_WARNING, r.stderr)
+            r = run(piped + ["--max-steps", "200"], input=text[:text.rindex("end ")])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertNotIn(NO_END_WARNING, r.stderr)
+            r = run(piped, input=text)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertNotIn(NO_END_WARNING, r.stderr)
+
+            # Converting a cut log passes the warning on.
+            r = run(["convert", "--source", "log", "--data", cut, "--out",
+                     os.path.join(d, "again.log")])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertIn("warning: " + warning, r.stderr)
+
+    def test_a_record_after_the_marker_is_refused(self):
+        with tempfile.TemporaryDirectory() as d:
+            log = os.path.join(d, "more.log")
+            with open(log, "w") as f:
+                f.write(UNKNOWN_ID + "control 0.3 0.1 1 0\n")
+            r = run(["run", "--source", "log", "--data", log, "--no-progress", "--no-plot"])
+            self.assertEqual(r.returncode, 1, r.stderr)
+            self.assertIn(log + ":13: 'control' after the end marker (line 12): the log ends "
+                          "there", r.stderr)
+            with open(log, "w") as f:
+                f.write(UNKNOWN_ID.replace("end 5", "end 4"))
+            r = run(["run", "--source", "log", "--data", log, "--no-progress", "--no-plot"])
+            self.assertEqual(r.returncode, 1, r.stderr)
+            self.assertIn(log + ":12: the end marker counts 4 records, but the log has 5 before "
+                          "it", r.stderr)
 
 
 if __name__ == "__main__":

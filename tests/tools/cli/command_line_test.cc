@@ -102,6 +102,17 @@ TEST_F(CommandLine, SeedsAndBudgetsAreSetOnlyWhenGiven) {
   EXPECT_FALSE(o.max_steps.has_value());
 }
 
+TEST_F(CommandLine, MaxMemoryTakesASizeFromTheFlagOrTheConfig) {
+  EXPECT_EQ(run("{}", "").max_memory, 0u);  // the machine's
+  EXPECT_EQ(run("{}", "--max-memory 4G").max_memory, std::uint64_t{4} << 30);
+  EXPECT_EQ(run(R"({"max-memory": "512M"})", "").max_memory, std::uint64_t{512} << 20);
+  EXPECT_EQ(run(R"({"max-memory": 1000})", "").max_memory, 1000u);
+  EXPECT_EQ(run(R"({"max-memory": "512M"})", "--max-memory 1K").max_memory, 1024u);
+  const std::string e = error_of("{}", "--max-memory 4X");
+  EXPECT_NE(e.find("--max-memory: '4X' is not a size (unknown unit)"), std::string::npos) << e;
+  EXPECT_NE(error_of(R"({"max-memory": "-1"})").find("key 'max-memory'"), std::string::npos);
+}
+
 TEST_F(CommandLine, SpacingAndScanPeriodAreSetOnlyWhenGiven) {
   RunOptions o = run(R"({"spacing": 7.5})", "--scan-period 0.4");
   ASSERT_TRUE(o.spacing.has_value());

@@ -59,10 +59,12 @@ TEST(RunProvenance, TheOptionsObjectReadBackAsAConfigGivesItself) {
   const std::string path = testing::temp_path("provenance_config") + ".json";
   const nlohmann::json first = options_of(
       "--world loop --particles 7 --seed 12 --max-steps 40 --sigma-range 0.3 --association ml "
-      "--vp-max-diameter 0.8 --no-plot --resample every --trace t.csv");
+      "--vp-max-diameter 0.8 --no-plot --resample every --trace t.csv --max-memory 1.5G");
   EXPECT_EQ(first["particles"], 7);
+  EXPECT_EQ(first["max-memory"], std::uint64_t{3} << 29);  // bytes, read back as they are
   EXPECT_EQ(first["max-steps"], 40);
   EXPECT_EQ(first["max-seconds"], nullptr);
+  EXPECT_EQ(options_of("")["max-memory"], 0);  // the machine's
   EXPECT_EQ(first["sigma-range"], 0.3);
   EXPECT_EQ(first["spacing"], kDefaultLoopSpacing);
   std::ofstream(path) << first.dump();

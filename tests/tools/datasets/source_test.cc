@@ -2,7 +2,9 @@
 
 #include <cstdint>
 #include <cstdio>
+#include <fstream>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -172,7 +174,55 @@ TEST(LogSource, OpensALogFileAndNeedsItsPath) {
   Event e;
   std::vector<engine::Observation> scan;
   EXPECT_FALSE(source->next(e, scan));
+  EXPECT_TRUE(source->warnings().empty());
   std::remove(o.data.c_str());
+}
+
+// A log without its end marker runs, with a warning naming the file: the in-memory source's
+// from the log read, the streamed source's from its first pass over the file.
+TEST(LogSource, WarnsOfALogWithoutItsEndMarker) {
+  Log log;
+  log.landmarks = {{3, -1.0, 4.0}};
+  Event control;
+  control.time = 0.5;
+  control.dt = 0.5;
+  log.events = {control};
+  const std::string path = temp_path("log_source_cut") + ".log";
+  std::ostringstream written;
+  write_log(written, log);
+  std::string text = written.str();
+  ASSERT_EQ(text.substr(text.rfind("end ")), "end 2\n");
+  text.erase(text.rfind("end "));
+  std::ofstream(path) << text;
+
+  Log read = read_log(path);
+  ASSERT_TRUE(read.unterminated);
+  const LogSource memory(std::move(read), path);
+  ASSERT_EQ(memory.warnings().size(), 1u);
+  EXPECT_EQ(memory.warnings()[0], unterminated_log_warning(path));
+  EXPECT_TRUE(LogSource(log, "built").warnings().empty());  // built in memory: nothing to cut
+
+  SourceOptions o;
+  o.data = path;
+  const std::unique_ptr<Source> streamed = find_source("log").open(o);
+  ASSERT_EQ(streamed->warnings().size(), 1u);
+  EXPECT_EQ(streamed->warnings()[0], unterminated_log_warning(path));
+  Event e;
+  std::vector<engine::Observation> scan;
+  EXPECT_TRUE(streamed->next(e, scan));
+  EXPECT_FALSE(streamed->next(e, scan));
+  EXPECT_EQ(streamed->warnings().size(), 1u);  // said once
+
+  // A record after the marker fails the opening, naming the line.
+  std::ofstream(path) << text << "end 2\ncontrol 1 0.5 0 0\n";
+  try {
+    find_source("log").open(o);
+    ADD_FAILURE() << "a record after the end marker was accepted";
+  } catch (const std::runtime_error& error) {
+    EXPECT_NE(std::string(error.what()).find("'control' after the end marker"), std::string::npos)
+        << error.what();
+  }
+  std::remove(path.c_str());
 }
 
 }  // namespace

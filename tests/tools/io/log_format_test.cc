@@ -1,5 +1,6 @@
 #include "tools/io/log_format.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -252,6 +253,12 @@ TEST(LogFormat, RefusesEveryMalformedClassNamingFileLineAndReason) {
       {h + "landmark 1 0 0\nlandmark 1 2 2\n", "x.log:8: landmark id 1 is repeated"},
       {h + "landmark 1 0\n", "x.log:7: 'landmark' needs 4 fields"},
       {h + "end_header\n", "x.log:7: unknown record 'end_header'"},
+      {h + "end\n", "x.log:7: 'end' needs 2 fields (end RECORDS)"},
+      {h + "end -1\n", "x.log:7: record count: '-1' is not a non-negative integer"},
+      {h + "control 1 0.1 0 0\nend 0\n",
+       "x.log:8: the end marker counts 0 records, but the log has 1 before it"},
+      {h + "end 0\nend 0\n", "x.log:8: 'end' after the end marker (line 7)"},
+      {"fastslam-log 1\nend 0\n", "x.log:2: unknown header line 'end'"},
   };
   for (const auto& [text, expected] : cases) {
     const std::string e = error_of(text);
@@ -304,8 +311,10 @@ TEST(LogFormat, ScansOverTheLimitAndLongTokensAreRefusedBriefly) {
   const std::string h = kHeader;
   const std::string over = std::to_string(kMaxScanObservations + 1);
   EXPECT_NE(error_of(h + "scan 1 " + over + " 5 0.1 -\n")
-                .find("x.log:7: scan of " + over + " observations: more than the format's "
-                      "limit of " + std::to_string(kMaxScanObservations)),
+                .find("x.log:7: scan of " + over +
+                      " observations: more than the format's "
+                      "limit of " +
+                      std::to_string(kMaxScanObservations)),
             std::string::npos);
   // A bad token of 200000 bytes is quoted by its first kMaxQuotedBytes and its length.
   const std::string junk(200'000, '7');
@@ -342,7 +351,8 @@ TEST(LogReader, StreamsWhatReadLogReadsAndFailsAtTheBadRecord) {
       ASSERT_EQ(scan.size(), w.count);
       for (std::size_t j = 0; j < scan.size(); ++j) {
         const engine::Observation& z = want.observations[w.first + j];
-        EXPECT_EQ(std::bit_cast<std::uint64_t>(scan[j].range), std::bit_cast<std::uint64_t>(z.range));
+        EXPECT_EQ(std::bit_cast<std::uint64_t>(scan[j].range),
+                  std::bit_cast<std::uint64_t>(z.range));
         EXPECT_EQ(scan[j].id, z.id);
       }
     }
@@ -376,6 +386,101 @@ TEST(LogReader, StreamsWhatReadLogReadsAndFailsAtTheBadRecord) {
         << error.what();
   }
   EXPECT_GE(given, 3u);
+}
+
+// The writer closes a log with `end N`, N its records (landmarks included); the readers accept
+// it, hold a log whole only with it, and refuse what would make it a lie.
+TEST(LogFormat, TheEndMarkerCountsTheRecordsAndClosesTheLog) {
+  const Log log = sample_log(engine::MotionKind::kBaileyCar);
+  std::ostringstream written;
+  write_log(written, log);
+  const std::string text = written.str();
+  const std::string end =
+      "\nend " + std::to_string(log.events.size() + log.landmarks.size()) + "\n";
+  ASSERT_GE(text.size(), end.size());
+  EXPECT_EQ(text.substr(text.size() - end.size()), end);
+  std::istringstream whole(text);
+  const Log back = read_log(whole, "x.log");
+  EXPECT_TRUE(back == log);
+  EXPECT_FALSE(back.unterminated);
+  std::istringstream streamed(text);
+  LogReader reader(streamed, "x.log");
+  Event e;
+  std::vector<engine::Observation> scan;
+  std::size_t events = 0;
+  while (reader.next(e, scan)) ++events;
+  EXPECT_EQ(events, log.events.size());
+  EXPECT_TRUE(reader.ended());
+  // Comments and blank lines may follow the marker.
+  std::istringstream trailing(text + "# the end\n\n");
+  EXPECT_FALSE(read_log(trailing, "x.log").unterminated);
+
+  // Any record after it is refused, naming its line and the marker's.
+  const std::uint64_t end_line =
+      static_cast<std::uint64_t>(std::count(text.begin(), text.end(), '\n'));
+  const std::string after = error_of(text + "control 1e9 0.1 0 0\n");
+  EXPECT_NE(after.find("x.log:" + std::to_string(end_line + 1) +
+                       ": 'control' after the end marker (line " + std::to_string(end_line) +
+                       "): the log ends there"),
+            std::string::npos)
+      << after;
+  EXPECT_NE(error_of(text + "landmark 99 0 0\n").find("'landmark' after the end marker"),
+            std::string::npos);
+
+  // A count that is not the records': both counts and the marker's line are named.
+  std::string lost = text;
+  const std::size_t first_control = lost.find("\ncontrol ");
+  lost.erase(first_control, lost.find('\n', first_control + 1) - first_control);
+  const std::string wrong = error_of(lost);
+  EXPECT_NE(wrong.find("x.log:" + std::to_string(end_line - 1) + ": the end marker counts " +
+                       std::to_string(log.events.size() + log.landmarks.size()) +
+                       " records, but the log has " +
+                       std::to_string(log.events.size() + log.landmarks.size() - 1) + " before it"),
+            std::string::npos)
+      << wrong;
+}
+
+// A log cut at a line boundary (or written before the marker existed) is read whole as it is,
+// and says it may be truncated.
+TEST(LogFormat, ALogWithoutTheEndMarkerReadsAndSaysSo) {
+  const Log log = sample_log(engine::MotionKind::kBaileyCar);
+  std::ostringstream written;
+  write_log(written, log);
+  std::string text = written.str();
+  text.erase(text.rfind("end "));
+  std::istringstream in(text);
+  const Log back = read_log(in, "cut.log");
+  EXPECT_TRUE(back.unterminated);
+  EXPECT_TRUE(back == log);  // what it holds is the same
+  std::istringstream streamed(text);
+  LogReader reader(streamed, "cut.log");
+  Event e;
+  std::vector<engine::Observation> scan;
+  while (reader.next(e, scan)) {
+  }
+  EXPECT_FALSE(reader.ended());
+  const std::string warning = unterminated_log_warning("cut.log");
+  EXPECT_EQ(
+      warning.rfind("cut.log: the log has no end marker ('end N'), so it may be truncated", 0), 0u)
+      << warning;
+  EXPECT_NE(warning.find("fastslam convert"), std::string::npos);
+  // A log built in memory has no file to be cut.
+  EXPECT_FALSE(log.unterminated);
+}
+
+TEST(LogFormat, TheWriterWritesNothingAfterFinish) {
+  std::ostringstream out;
+  LogWriter writer(out, LogHeader{});
+  writer.landmark({1, 2.0, 3.0});
+  writer.control(0.5, 0.5, {1.0, 0.0});
+  writer.finish();
+  EXPECT_THROW(writer.control(1.0, 0.5, {1.0, 0.0}), std::logic_error);
+  EXPECT_THROW(writer.landmark({2, 0.0, 0.0}), std::logic_error);
+  EXPECT_THROW(writer.finish(), std::logic_error);
+  const std::string text = out.str();
+  EXPECT_EQ(text.substr(text.size() - 7), "\nend 2\n");
+  std::istringstream in(text);
+  EXPECT_FALSE(read_log(in, "x.log").unterminated);
 }
 
 TEST(LogFormat, NothingPartialAndAMissingFileIsNamed) {
