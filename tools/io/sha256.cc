@@ -71,6 +71,7 @@ void Sha256::block(const std::uint8_t* p) noexcept {
 }
 
 void Sha256::update(const void* data, std::size_t size) noexcept {
+  if (size == 0) return;  // `data` may then be null, which memcpy must never see
   const auto* p = static_cast<const std::uint8_t*>(data);
   length_ += size;
   if (buffered_ > 0) {

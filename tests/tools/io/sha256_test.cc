@@ -57,6 +57,14 @@ TEST(Sha256, SplitsGiveTheSameDigest) {
   }
 }
 
+// An empty piece may come as a null pointer (an empty vector's data()), mid-block too.
+TEST(Sha256, EmptyPiecesFromNullPointersChangeNothing) {
+  Sha256 h;
+  h.update("abc", 3);
+  h.update(nullptr, 0);
+  EXPECT_EQ(to_hex(h.finish()), sha256_hex("abc"));
+}
+
 // A file over two 1 MiB chunks, not a multiple of the block size, read in pieces.
 TEST(Sha256, FileDigestEqualsTheBytesDigest) {
   const std::string path = testing::temp_path("sha256_file");
