@@ -309,7 +309,7 @@ CASES = [
     Case("no end_header", log_with(no_end_header), LOG_RUN, 1,
          "{log}:{line}: end of file inside the header (no 'end_header')", **REFUSED, **KEPT),
     Case("unknown record", log_with(unknown_record), LOG_RUN, 1,
-         "{log}:{line}: unknown record 'odometry' (control, scan, pose, gps or landmark)",
+         "{log}:{line}: unknown record 'odometry' (control, scan, pose, gps, landmark or end)",
          **REFUSED, **KEPT),
     Case("repeated landmark id", log_with(repeated_landmark), LOG_RUN, 1,
          "{log}:{line}: landmark id 0 is repeated", **REFUSED, **KEPT),
