@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <fcntl.h>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -20,6 +21,7 @@
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <unistd.h>
 #include <vector>
 
 #include "bindings/config_json.h"
@@ -437,24 +439,66 @@ fastslam_status fastslam_get_statistics(fastslam_filter* filter, fastslam_statis
   });
 }
 
+namespace {
+
+// Writes `bytes` to a temporary beside `path`, fsyncs it and renames it over `path`, so a
+// failure or a kill mid-write leaves the previous file whole. Returns "" or the reason, naming
+// the file. A symlink is written through. The same as tools/io/atomic_file.h, kept local:
+// libfastslam links the engine and the bindings only, not the tools' libraries (and their
+// export set). Costs: one fsync.
+std::string replace_file(const std::string& path, std::string_view bytes) {
+  std::error_code ec;
+  std::string target = path;
+  if (std::filesystem::is_symlink(path, ec)) {
+    const std::filesystem::path resolved = std::filesystem::weakly_canonical(path, ec);
+    if (!ec) target = resolved.string();
+  }
+  if (std::filesystem::is_directory(target, ec)) return "'" + path + "' is a directory";
+  const std::size_t slash = target.rfind('/');
+  const std::string temp =
+      (slash == std::string::npos ? std::string() : target.substr(0, slash + 1)) + "." +
+      target.substr(slash == std::string::npos ? 0 : slash + 1) + ".tmp-" +
+      std::to_string(::getpid());
+  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+  if (fd < 0) return "cannot open '" + path + "' for writing: " + system_message(errno);
+  const auto give_up = [&](const char* what) {
+    const std::string reason = system_message(errno);
+    ::close(fd);
+    ::unlink(temp.c_str());
+    return std::string(what) + " '" + path + "' failed: " + reason;
+  };
+  for (std::size_t done = 0; done < bytes.size();) {
+    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) return give_up("writing");
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fsync(fd) != 0) return give_up("writing");
+  if (::close(fd) != 0) {
+    const std::string reason = system_message(errno);
+    ::unlink(temp.c_str());
+    return "writing '" + path + "' failed: " + reason;
+  }
+  if (::rename(temp.c_str(), target.c_str()) != 0) {
+    const std::string reason = system_message(errno);
+    ::unlink(temp.c_str());
+    return "replacing '" + path + "' failed: " + reason;
+  }
+  return "";
+}
+
+}  // namespace
+
 fastslam_status fastslam_save_file(fastslam_filter* filter, const char* path) {
   FASTSLAM_REQUIRE_FILTER(filter, "fastslam_save_file");
   filter->saved.reset();
   FASTSLAM_REQUIRE_POINTER(filter, path, "fastslam_save_file", "path");
   return guarded(filter, [&] {
-    errno = 0;
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      return fail(filter, FASTSLAM_IO_ERROR,
-                  std::string("fastslam_save_file: cannot open '") + path +
-                      "' for writing: " + system_message(errno));
-    }
-    filter->filter->save(out);
-    out.close();
-    if (!out) {
-      return fail(filter, FASTSLAM_IO_ERROR,
-                  std::string("fastslam_save_file: writing '") + path +
-                      "' failed: " + system_message(errno));
+    std::ostringstream state;
+    filter->filter->save(state);
+    const std::string error = replace_file(path, state.view());
+    if (!error.empty()) {
+      return fail(filter, FASTSLAM_IO_ERROR, "fastslam_save_file: " + error);
     }
     return FASTSLAM_OK;
   });

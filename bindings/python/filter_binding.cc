@@ -32,6 +32,7 @@
 #include "bindings/python/records.h"
 #include "engine/filter.h"
 #include "engine/filter_config.h"
+#include "tools/io/atomic_file.h"
 
 namespace fastslam::bindings::python {
 namespace {
@@ -539,12 +540,17 @@ covariance that is not symmetric positive definite or a repeated id with known a
           "save",
           [](PyFilter& self, const py::object& path) {
             const std::string name = path_string(path);
+            // A temporary renamed over the file: a failure or a kill mid-write leaves the
+            // previous file whole.
             self.call([&](engine::Filter& f) {
-              std::ofstream out(name, std::ios::binary);
-              if (!out) throw std::runtime_error(name + ": cannot open for writing");
-              f.save(out);
-              out.close();
-              if (!out) throw std::runtime_error(name + ": write failed");
+              tools::AtomicFile out(name);
+              try {
+                f.save(out.stream());
+              } catch (const std::runtime_error&) {
+                if (out.failed()) out.flush();  // throws naming the file and the system's reason
+                throw;
+              }
+              out.commit();
             });
           },
           py::arg("path"),

@@ -369,6 +369,12 @@ void apply_json_config(CLI::App& cmd, const std::string& path) {
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(path + ": not valid JSON: " + e.what());
   }
+  // The parser takes a NUL byte for the end of the text and stops there, so anything after
+  // one would go unread: the text must end where the object does.
+  if (!in.eof()) {
+    throw std::runtime_error(path + ": byte " + std::to_string(static_cast<long long>(in.tellg())) +
+                             ": a NUL byte after the JSON object: not a JSON text");
+  }
   apply_json_config(cmd, config, path);
 }
 

@@ -658,7 +658,7 @@ int run_simulation(const RunOptions& options) {
   return metrics["status"] == "interrupted" ? 128 + interrupt_signal() : 0;
 }
 
-nlohmann::json run_once(const RunOptions& options) {
+nlohmann::json run_once(const RunOptions& options, const std::function<void()>& accepted) {
   const std::vector<std::string> input_paths = run_inputs(options);
   const bool checkpointing = !options.checkpoint.empty();
   const bool resuming = !options.resume.empty();
@@ -711,6 +711,7 @@ nlohmann::json run_once(const RunOptions& options) {
   // The source opened and the settings accepted: only now does the run replace an earlier
   // one's files, so a run refused for its input or options leaves them as they were.
   if (!options.out.empty()) clear_earlier_run(options.out, kRunFileNames);
+  if (accepted) accepted();
   created.keep();
   const bool ekf = config.algorithm == engine::Algorithm::kEkf;
   const std::uint32_t particles = ekf ? 1 : config.particles;
@@ -812,17 +813,17 @@ nlohmann::json run_once(const RunOptions& options) {
     std::filesystem::remove(options.checkpoint, ignored);
   }
   if (r.failure) {
-    throw std::runtime_error(*r.failure + (options.out.empty()
-                                               ? std::string()
-                                               : "; what the run had is in " + options.out +
-                                                     " (metrics.json: \"status\")"));
+    throw RunFailed(*r.failure + (options.out.empty() ? std::string()
+                                                      : "; what the run had is in " + options.out +
+                                                            " (metrics.json: \"status\")"),
+                    std::make_shared<const nlohmann::json>(std::move(metrics)));
   }
   if (r.input_error) {
-    throw std::runtime_error(*r.input_error + (options.out.empty()
-                                                   ? std::string()
-                                                   : "; the results up to the record before it "
-                                                     "are in " +
-                                                         options.out));
+    throw RunFailed(*r.input_error + (options.out.empty() ? std::string()
+                                                          : "; the results up to the record "
+                                                            "before it are in " +
+                                                                options.out),
+                    std::make_shared<const nlohmann::json>(std::move(metrics)));
   }
   return metrics;
 }

@@ -11,7 +11,10 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -172,9 +175,25 @@ std::vector<std::string> run_inputs(const RunOptions& options);
 // unreadable files, or a failure after the start (the results so far written first, with
 // "status": "failed: REASON").
 int run_simulation(const RunOptions& options);
-// The same, returning the run's metrics.json object. The output directory is checked and
-// cleared of an earlier run's files before any work (tools/cli/run_output.h).
-nlohmann::json run_once(const RunOptions& options);
+// What run_once throws for a failure after the run was accepted (a numerical failure, a file
+// it could not write, a bad record in its input): the message, and the run's metrics.json
+// object, with "status": "failed: REASON", as it was written.
+class RunFailed : public std::runtime_error {
+ public:
+  RunFailed(const std::string& what, std::shared_ptr<const nlohmann::json> metrics)
+      : std::runtime_error(what), metrics_(std::move(metrics)) {}
+  const nlohmann::json& metrics() const noexcept { return *metrics_; }
+
+ private:
+  std::shared_ptr<const nlohmann::json> metrics_;  // shared: copying an exception must not throw
+};
+
+// The same, returning the run's metrics.json object. The output directory is checked before
+// any work and cleared of an earlier run's files only once the source has opened and the
+// settings are accepted (tools/cli/run_output.h); `accepted`, when given, is called then, so a
+// caller can do the same for files of its own. A refusal before that throws std::exception; a
+// failure after it throws RunFailed.
+nlohmann::json run_once(const RunOptions& options, const std::function<void()>& accepted = {});
 // The filter configuration run_once(options) builds: the source opened for its header and its
 // recommendations, the association resolved. For replaying a source through a Filter of one's
 // own (the Python module). Costs: opening the source (a log is read whole).

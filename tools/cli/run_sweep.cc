@@ -116,12 +116,26 @@ int run_sweep(const RunOptions& options) {
   const std::vector<std::uint64_t>& seeds = options.seeds;
   if (seeds.empty()) throw std::invalid_argument("--seeds: no seed given");
   constexpr const char* kSweepFiles[] = {"sweep.json", "sweep.csv"};
-  if (!options.out.empty()) prepare_output_dir(options.out, run_inputs(options), kSweepFiles);
+  // As for a single run: the directory checked now, an earlier sweep's files removed only once
+  // the first seed has opened the input and been accepted, so a refused sweep loses nothing.
+  CreatedDir created(
+      options.out,
+      !options.out.empty() && check_output_dir(options.out, run_inputs(options), kSweepFiles));
+  bool accepted = false;
+  const auto on_accepted = [&] {
+    if (accepted) return;
+    if (!options.out.empty()) clear_earlier_run(options.out, kSweepFiles);
+    accepted = true;
+    created.keep();
+  };
   const InterruptHandlers handlers;
   // The provenance once for the sweep, not per seed: the inputs hashed once, the build and the
   // options (the first seed's, with the sweep's seeds and output directory) taken off each run.
   nlohmann::json provenance = {{"inputs", input_files_json(options)}};
   std::vector<nlohmann::json> per_seed;
+  // The first seed that failed after it started, and why: the sweep stops there, its files
+  // written with the seeds so far, and then reports it.
+  std::string failure;
   for (const std::uint64_t seed : seeds) {
     RunOptions o = options;
     o.filter.seed = seed;
@@ -129,22 +143,39 @@ int run_sweep(const RunOptions& options) {
     if (!options.out.empty()) o.out = options.out + "/seed-" + std::to_string(seed);
     std::printf("== seed %llu\n", static_cast<unsigned long long>(seed));
     std::fflush(stdout);
-    per_seed.push_back(run_once(o));
-    nlohmann::json& m = per_seed.back();
-    const bool interrupted = m["status"] == "interrupted";
-    m["seed"] = seed;
+    nlohmann::json m;
+    try {
+      m = run_once(o, on_accepted);
+    } catch (const std::exception& e) {
+      // Before the sweep started, a refusal: nothing to summarise.
+      if (!accepted) throw;
+      failure = "seed " + std::to_string(seed) + ": " + e.what();
+      const auto* failed = dynamic_cast<const RunFailed*>(&e);
+      m = failed != nullptr ? failed->metrics()
+                            : nlohmann::json{{"status", std::string("failed: ") + e.what()}};
+    }
+    per_seed.push_back(std::move(m));
+    nlohmann::json& entry = per_seed.back();
+    const bool interrupted = entry["status"] == "interrupted";
+    entry["seed"] = seed;
     for (const char* key : {"schema_version", "build", "options"}) {
-      if (!provenance.contains(key)) provenance[key] = m[key];
-      m.erase(key);
+      if (!entry.contains(key)) continue;
+      if (!provenance.contains(key)) provenance[key] = entry[key];
+      entry.erase(key);
     }
     // The seeds run so far are summarised; the rest are not started.
-    if (interrupted) break;
+    if (interrupted || !failure.empty()) break;
   }
   const int signal = interrupt_signal();
   provenance["options"]["seed"] = nullptr;
   provenance["options"]["seeds"] = seeds;
   provenance["options"]["out"] = options.out;
-  const nlohmann::json summary = summarise_seeds(per_seed);
+  // A failed seed's numbers are those of a run cut short: listed, not summarised.
+  std::vector<nlohmann::json> finished;
+  for (const nlohmann::json& m : per_seed) {
+    if (!m.value("status", "").starts_with("failed")) finished.push_back(m);
+  }
+  const nlohmann::json summary = summarise_seeds(finished);
   std::printf("== %zu seeds: mean / median / worst (max) / stdev\n", seeds.size());
   for (const char* key : kHeadline) {
     if (!summary.contains(key)) continue;
@@ -153,11 +184,16 @@ int run_sweep(const RunOptions& options) {
                 s["median"].get<double>(), s["max"].get<double>(), s["stdev"].get<double>());
   }
   const int code = signal != 0 ? 128 + signal : 0;
-  if (options.out.empty()) return code;
+  if (options.out.empty()) {
+    if (!failure.empty()) throw std::runtime_error(failure);
+    return code;
+  }
   {
     nlohmann::json sweep = std::move(provenance);
     sweep["seeds"] = seeds;
-    sweep["status"] = signal != 0 ? "interrupted" : "complete";
+    sweep["status"] = !failure.empty() ? "failed: " + failure
+                      : signal != 0    ? "interrupted"
+                                       : "complete";
     sweep["summary"] = summary;
     sweep["per_seed"] = per_seed;
     write_file_atomically(options.out + "/sweep.json", sweep.dump(2) + '\n');
@@ -185,6 +221,10 @@ int run_sweep(const RunOptions& options) {
   }
   file.commit();
   std::printf("  wrote %s/{sweep.json,sweep.csv,seed-*/}\n", options.out.c_str());
+  if (!failure.empty()) {
+    throw std::runtime_error(failure + "; the seeds up to it are in " + options.out +
+                             "/sweep.json");
+  }
   return code;
 }
 

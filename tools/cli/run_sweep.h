@@ -4,7 +4,11 @@
 // deviation; booleans as the number of seeds where true) into OUT/sweep.json, with every seed's
 // metrics, and OUT/sweep.csv (a row per seed); a table of the headline errors goes to stdout.
 // SIGINT or SIGTERM end the seed running (its results written, tools/cli/interrupt.h) and the
-// sweep: the seeds so far are summarised, sweep.json says "status": "interrupted".
+// sweep: the seeds so far are summarised, sweep.json says "status": "interrupted". A seed that
+// fails after it started (a numerical failure, a bad record in the input) ends the sweep too:
+// sweep.json lists it with its "status": "failed: ...", summarises the seeds before it, and
+// run_sweep then throws naming the seed. An earlier sweep's sweep.json and sweep.csv are
+// removed only once the first seed has been accepted (tools/cli/run_command.h run_once).
 // sweep.json carries the provenance (tools/cli/run_provenance.h) once, at its top: the
 // inputs hashed once, the build, the options with every seed; the seeds' entries leave it out.
 //
@@ -32,7 +36,8 @@ std::vector<std::uint64_t> parse_seeds(const std::string& text);
 nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed);
 
 // Runs `options` once per seed of options.seeds; returns the process exit code (128 + the
-// signal when interrupted).
+// signal when interrupted). Throws std::exception for a sweep refused before its first seed
+// started, or, once its files are written, for a seed that failed, naming it.
 int run_sweep(const RunOptions& options);
 
 }  // namespace fastslam::tools

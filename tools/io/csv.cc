@@ -3,10 +3,13 @@
 #include <charconv>
 #include <cmath>
 #include <cstddef>
+#include <ios>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <utility>
+
+#include "tools/io/log_format.h"
 
 namespace fastslam::tools {
 namespace {
@@ -58,8 +61,7 @@ std::string quoted(std::string_view field) {
 CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
     : path_(std::move(path)), columns_(std::move(columns)), in_(path_) {
   if (!in_) throw std::runtime_error(path_ + ": cannot open for reading");
-  if (!std::getline(in_, text_)) fail("empty file, expected a header line");
-  line_ = 1;
+  if (!read_line()) fail("empty file, expected a header line");
   const std::vector<std::string_view> header = split(text_);
   bool same = header.size() == columns_.size();
   for (std::size_t i = 0; same && i < header.size(); ++i) same = header[i] == columns_[i];
@@ -71,8 +73,7 @@ CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
 }
 
 bool CsvReader::next(std::span<double> out) {
-  while (std::getline(in_, text_)) {
-    ++line_;
+  while (read_line()) {
     if (trim(text_).empty()) continue;
     const std::vector<std::string_view> fields = split(text_);
     if (fields.size() != columns_.size()) {
@@ -93,8 +94,35 @@ bool CsvReader::next(std::span<double> out) {
     }
     return true;
   }
-  if (in_.bad()) fail("read error");
   return false;
+}
+
+bool CsvReader::read_line() {
+  text_.clear();
+  std::streambuf* const buffer = in_.rdbuf();
+  if (buffer == nullptr) return false;
+  ++line_;
+  bool any = false;
+  for (;;) {
+    int c = 0;
+    // The stream buffer throws for a read the system refuses (a directory, an I/O error).
+    try {
+      c = buffer->sbumpc();
+    } catch (const std::ios_base::failure& e) {
+      fail("cannot read: " + e.code().message());
+    }
+    if (c == std::char_traits<char>::eof()) {
+      if (!any) --line_;
+      return any;
+    }
+    any = true;
+    if (c == '\n') return true;
+    if (text_.size() == kMaxLogLineBytes) {
+      fail("line longer than " + std::to_string(kMaxLogLineBytes) +
+           " bytes (the limit of a line, as for a log): not a CSV file of numbers");
+    }
+    text_.push_back(static_cast<char>(c));
+  }
 }
 
 void CsvReader::fail(const std::string& what) const {

@@ -3,7 +3,8 @@
 // that is not a number, a non-finite value, a header that is not the expected one.
 //
 // Ownership: owns its file stream. Thread safety: thread-compatible.
-// Costs: O(bytes read); one line buffer, reused.
+// Costs: O(bytes read); one line buffer, reused, of at most kMaxLogLineBytes
+// (tools/io/log_format.h): a longer line (a file with no newline) is refused, not read whole.
 #pragma once
 
 #include <cstddef>
@@ -28,6 +29,10 @@ class CsvReader {
   [[noreturn]] void fail(const std::string& what) const;
 
  private:
+  // One line into text_, without its '\n'; false at the end with nothing read. Throws (fail)
+  // for a line longer than kMaxLogLineBytes.
+  bool read_line();
+
   std::string path_;
   std::vector<std::string> columns_;
   std::ifstream in_;

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -553,6 +554,52 @@ TEST(CApi, CorruptStatesAreRefusedFromABufferAndAFile) {
             FASTSLAM_IO_ERROR);
   EXPECT_EQ(fastslam_save_file(h.get(), "/nonexistent-directory/state"), FASTSLAM_IO_ERROR);
   EXPECT_NE(std::string(fastslam_last_error(h.get())).find("cannot open"), std::string::npos);
+}
+
+std::string read_whole(const std::string& path) {
+  std::string text(std::filesystem::file_size(path), '\0');
+  std::ifstream(path, std::ios::binary)
+      .read(text.data(), static_cast<std::streamsize>(text.size()));
+  return text;
+}
+
+// A save that fails part way (a full disk: a 64 KiB tmpfs, root only) leaves the file it
+// would have replaced whole, and no temporary beside it.
+TEST(CApi, FailedSaveLeavesThePreviousFileWhole) {
+  if (::geteuid() != 0) GTEST_SKIP() << "not root: cannot mount a tmpfs";
+  const std::string dir = temp_path("full");
+  std::filesystem::create_directories(dir);
+  if (std::system(("mount -t tmpfs -o size=64k tmpfs " + dir + " 2>/dev/null").c_str()) != 0) {
+    std::filesystem::remove(dir);
+    GTEST_SKIP() << "cannot mount a tmpfs";
+  }
+  Handle h = create(kKnownConfig);
+  const std::string path = dir + "/state";
+  ASSERT_EQ(fastslam_save_file(h.get(), path.c_str()), FASTSLAM_OK) << fastslam_last_error(h.get());
+  const std::string before = read_whole(path);
+  {
+    std::ofstream filler(dir + "/filler", std::ios::binary);
+    const std::string block(4096, 'x');
+    while (filler.write(block.data(), static_cast<std::streamsize>(block.size()))) {
+    }
+  }
+  World world;
+  drive(h.get(), world, 0, 60);
+  // Larger than the old file by more than a page: written in place, it would not fit.
+  ASSERT_GT(save(h.get()).size(), before.size() + 8192);
+  EXPECT_EQ(fastslam_save_file(h.get(), path.c_str()), FASTSLAM_IO_ERROR);
+  EXPECT_NE(std::string(fastslam_last_error(h.get())).find("No space left on device"),
+            std::string::npos)
+      << fastslam_last_error(h.get());
+  EXPECT_EQ(read_whole(path), before);
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    names.push_back(e.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"filler", "state"}));
+  EXPECT_EQ(std::system(("umount " + dir).c_str()), 0);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(CApi, ErrorsBelongToTheirHandleAndThread) {

@@ -220,6 +220,50 @@ class Outputs(unittest.TestCase):
             self.assertEqual(sweep["per_seed"][0]["status"], "interrupted")
             self.assertEqual(read_metrics(os.path.join(out, "seed-1"))["status"], "interrupted")
 
+    def test_refused_sweep_keeps_the_earlier_sweep(self):
+        with tempfile.TemporaryDirectory() as d:
+            out = os.path.join(d, "out")
+            r = run(["run"] + SMALL + ["--seeds", "1-2", "--out", out])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            before = {}
+            for name_ in ["sweep.json", "sweep.csv"]:
+                with open(os.path.join(out, name_)) as f:
+                    before[name_] = f.read()
+            bad = os.path.join(d, "bad.log")
+            with open(bad, "w") as f:
+                f.write("not a log\n")
+            r = run(["run", "--source", "log", "--data", bad, "--seeds", "1-2", "--no-progress",
+                     "--no-plot", "--out", out])
+            self.assertEqual(r.returncode, 1, r.stderr)
+            self.assertIn(bad + ":1:", r.stderr)
+            for name_, text in before.items():
+                with open(os.path.join(out, name_)) as f:
+                    self.assertEqual(f.read(), text, name_)
+
+    def test_failed_seed_is_in_the_sweep(self):
+        with tempfile.TemporaryDirectory() as d:
+            out = os.path.join(d, "out")
+            log = os.path.join(d, "twice.log")
+            # The second scan sees landmark 3 twice, which the filter refuses mid-run.
+            with open(log, "w") as f:
+                f.write(HEADER + "landmark 3 5 0\ncontrol 0.1 0.1 1 0\nscan 0.1 1 5 0.1 3\n"
+                        "control 0.2 0.1 1 0\nscan 0.2 2 5 0.1 3 6 0.2 3\n")
+            r = run(["run", "--source", "log", "--data", log, "--association", "known",
+                     "--seeds", "4-5", "--no-progress", "--no-plot", "--out", out])
+            self.assertEqual(r.returncode, 1, r.stderr)
+            self.assertIn("fastslam: error: seed 4: " + log + ":", r.stderr)
+            self.assertEqual(temporaries(out), [])
+            with open(os.path.join(out, "sweep.json")) as f:
+                sweep = json.load(f)
+            self.assertTrue(sweep["status"].startswith("failed: seed 4: "), sweep["status"])
+            self.assertEqual(len(sweep["per_seed"]), 1)
+            self.assertEqual(sweep["per_seed"][0]["seed"], 4)
+            self.assertTrue(sweep["per_seed"][0]["status"].startswith("failed: "))
+            self.assertEqual(read_metrics(os.path.join(out, "seed-4"))["status"],
+                             sweep["per_seed"][0]["status"])
+            self.assertFalse(os.path.exists(os.path.join(out, "seed-5")))
+            self.assertTrue(os.path.exists(os.path.join(out, "sweep.csv")))
+
     def test_second_sigint_kills_at_once(self):
         with tempfile.TemporaryDirectory() as out:
             p = subprocess.Popen([FASTSLAM] + LONG + ["--out", out], stdout=subprocess.DEVNULL,

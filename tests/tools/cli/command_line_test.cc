@@ -136,6 +136,19 @@ TEST_F(CommandLine, ThreadsGrainAndSplit) {
   EXPECT_NE(error_of("{}", "--split-seconds -1").find("--split-seconds"), std::string::npos);
 }
 
+// Nothing but white space may follow the object: not a NUL byte (which the parser would take
+// for the end of the text), not another word.
+TEST_F(CommandLine, RefusesAnythingAfterTheObject) {
+  std::string e = error_of(std::string("{\"particles\": 10}\n\0{\"seed\": 3}", 30));
+  EXPECT_NE(e.find(path_ + ": byte 19: a NUL byte after the JSON object"), std::string::npos) << e;
+  e = error_of(std::string("{\"particles\": 10}\0", 18));
+  EXPECT_NE(e.find(path_ + ": byte 18: a NUL byte"), std::string::npos) << e;
+  e = error_of("{\"particles\": 10} x");
+  EXPECT_NE(e.find(path_ + ": not valid JSON: "), std::string::npos) << e;
+  EXPECT_NE(e.find("line 1, column 19"), std::string::npos) << e;
+  EXPECT_EQ(run("{\"particles\": 10}\n \t\r\n", "").filter.particles, 10u);
+}
+
 TEST_F(CommandLine, RefusesUnknownKeysAndBadValuesNamingTheKey) {
   std::string e = error_of(R"({"particles": 10, "partcles": 5})");
   EXPECT_NE(e.find(path_ + ": key 'partcles': unknown option"), std::string::npos) << e;

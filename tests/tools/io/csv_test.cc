@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tools/io/log_format.h"
+
 namespace fastslam::tools {
 namespace {
 
@@ -47,6 +49,35 @@ TEST_F(CsvTest, ReadsRowsAndSkipsBlankLines) {
   ASSERT_TRUE(reader.next(row));
   EXPECT_EQ(row, (std::array<double, 3>{2, 40, 5}));
   EXPECT_FALSE(reader.next(row));
+}
+
+// A line is held to the log reader's limit, so a file with no newline is refused, not read
+// whole into memory.
+TEST_F(CsvTest, RefusesALineLongerThanTheLimit) {
+  const std::string limit = std::to_string(kMaxLogLineBytes);
+  {
+    const std::string e = error_of("id,x_m,y_m\n1,2,3\n" + std::string(kMaxLogLineBytes + 1, '7'));
+    EXPECT_NE(e.find(path_ + ":3: line longer than " + limit + " bytes"), std::string::npos) << e;
+  }
+  {
+    const std::string e = error_of(std::string(kMaxLogLineBytes + 1, 'x'));
+    EXPECT_NE(e.find(path_ + ":1: line longer than " + limit + " bytes"), std::string::npos) << e;
+  }
+  // A line of exactly the limit is read.
+  const std::string e =
+      error_of("id,x_m,y_m\n1,2," + std::string(kMaxLogLineBytes - 5, '0') + "3\n");
+  EXPECT_EQ(e, "");
+}
+
+// A directory opens but cannot be read: named, not a bare stream error.
+TEST_F(CsvTest, RefusesADirectory) {
+  const std::string dir = std::filesystem::temp_directory_path().string();
+  try {
+    CsvReader reader(dir, {"id"});
+    FAIL() << "read a directory";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(dir + ":"), std::string::npos) << e.what();
+  }
 }
 
 TEST_F(CsvTest, RefusesMalformedInputNamingFileLineAndReason) {
