@@ -122,7 +122,9 @@ nlohmann::json run_identity(const nlohmann::json& options, const nlohmann::json&
   return {{"build", build_info_json()}, {"options", kept}, {"inputs", inputs}};
 }
 
-void write_checkpoint(const std::string& path, const Checkpoint& c, const engine::Filter& filter) {
+void write_checkpoint(const std::string& path, const Checkpoint& c,
+                      std::span<const engine::TrajectoryPoint> poses,
+                      const engine::Filter& filter) {
   AtomicFile file(path);
   Sha256 hash;
   HashingBuffer buffer(file.stream(), hash);
@@ -136,8 +138,8 @@ void write_checkpoint(const std::string& path, const Checkpoint& c, const engine
                            {"run", c.run}};
   put_section(out, header.dump());
   put_section(out, c.trace);
-  put_section(out, std::string_view(reinterpret_cast<const char*>(c.poses.data()),
-                                    c.poses.size() * sizeof(engine::TrajectoryPoint)));
+  put_section(out, std::string_view(reinterpret_cast<const char*>(poses.data()),
+                                    poses.size() * sizeof(engine::TrajectoryPoint)));
   filter.save(out);
   if (!out) file.flush();  // throws naming the file and the reason
   const Sha256::Digest digest = hash.finish();

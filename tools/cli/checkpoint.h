@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -42,10 +43,11 @@ struct Checkpoint {
   std::string filter_state;                    // Filter::save's bytes
 };
 
-// Writes `c` to `path` atomically. `filter` supplies the state (c.filter_state is ignored), so a
-// large map streams to the file without a copy in memory. Throws std::runtime_error naming the
-// file and the reason.
-void write_checkpoint(const std::string& path, const Checkpoint& c, const engine::Filter& filter);
+// Writes `c` to `path` atomically, with `poses` and `filter`'s state in place of c.poses and
+// c.filter_state (ignored), so neither is copied in memory first. Throws std::runtime_error
+// naming the file and the reason.
+void write_checkpoint(const std::string& path, const Checkpoint& c,
+                      std::span<const engine::TrajectoryPoint> poses, const engine::Filter& filter);
 
 // Reads and checks a checkpoint: magic, version, section sizes against the file's, the hash and
 // the header's fields. Throws std::runtime_error "PATH: ..." saying what is wrong.

@@ -217,8 +217,7 @@ void write_loop_checkpoint(F& filter, const RunLoop& loop, const RunResult& r, c
     saved.scans = at.scans;
     saved.run = run_state_json(r, st, loop.trace);
     if (loop.trace != nullptr) saved.trace = loop.trace->text();
-    saved.poses = c.poses;
-    write_checkpoint(c.path, saved, filter);
+    write_checkpoint(c.path, saved, c.poses, filter);
   }
 }
 

@@ -69,7 +69,7 @@ TEST_F(CheckpointTest, RoundTripsEverySection) {
   const std::unique_ptr<engine::Filter> filter = small_filter();
   const Checkpoint saved = sample(*filter);
   ASSERT_EQ(saved.poses.size(), 5u);
-  write_checkpoint(path_, saved, *filter);
+  write_checkpoint(path_, saved, saved.poses, *filter);
   const Checkpoint read = read_checkpoint(path_);
   EXPECT_EQ(read.identity, saved.identity);
   EXPECT_EQ(read.events, 12u);
@@ -98,7 +98,8 @@ TEST_F(CheckpointTest, RoundTripsEverySection) {
 
 TEST_F(CheckpointTest, RefusesEveryTruncationAndAlteration) {
   const std::unique_ptr<engine::Filter> filter = small_filter();
-  write_checkpoint(path_, sample(*filter), *filter);
+  const Checkpoint c = sample(*filter);
+  write_checkpoint(path_, c, c.poses, *filter);
   const std::string good = read_bytes(path_);
   const std::string spoiled = (dir_ / "spoiled.ckp").string();
   for (std::size_t n = 0; n < good.size(); n += (n < 512 ? 1 : 17)) {
