@@ -9,6 +9,7 @@
 #include <string_view>
 #include <utility>
 
+#include "tools/io/bounded_line.h"
 #include "tools/io/log_format.h"
 
 namespace fastslam::tools {
@@ -98,31 +99,22 @@ bool CsvReader::next(std::span<double> out) {
 }
 
 bool CsvReader::read_line() {
-  text_.clear();
-  std::streambuf* const buffer = in_.rdbuf();
-  if (buffer == nullptr) return false;
   ++line_;
-  bool any = false;
-  for (;;) {
-    int c = 0;
-    // The stream buffer throws for a read the system refuses (a directory, an I/O error).
-    try {
-      c = buffer->sbumpc();
-    } catch (const std::ios_base::failure& e) {
-      fail("cannot read: " + e.code().message());
-    }
-    if (c == std::char_traits<char>::eof()) {
-      if (!any) --line_;
-      return any;
-    }
-    any = true;
-    if (c == '\n') return true;
-    if (text_.size() == kMaxLogLineBytes) {
-      fail("line longer than " + std::to_string(kMaxLogLineBytes) +
-           " bytes (the limit of a line, as for a log): not a CSV file of numbers");
-    }
-    text_.push_back(static_cast<char>(c));
+  LineEnd end = LineEnd::kEndOfInput;
+  try {
+    end = read_bounded_line(in_, text_, kMaxLogLineBytes);
+  } catch (const std::runtime_error& e) {
+    fail(e.what());
   }
+  if (end == LineEnd::kTooLong) {
+    fail("line longer than " + std::to_string(kMaxLogLineBytes) +
+         " bytes (the limit of a line, as for a log): not a CSV file of numbers");
+  }
+  if (end == LineEnd::kEndOfInput && text_.empty()) {
+    --line_;
+    return false;
+  }
+  return true;
 }
 
 void CsvReader::fail(const std::string& what) const {

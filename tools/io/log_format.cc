@@ -21,6 +21,7 @@
 #include "engine/enum_names.h"
 #include "engine/motion_dispatch.h"
 #include "tools/io/atomic_file.h"
+#include "tools/io/bounded_line.h"
 
 namespace fastslam::tools {
 
@@ -276,33 +277,24 @@ class LogReader::Parser {
   // fails there instead of being read whole. A read the system refuses (a directory, an I/O
   // error) fails naming the file and line, not with the stream buffer's bare message.
   bool read_line() {
-    text_.clear();
-    std::streambuf* const buffer = in_.rdbuf();
-    if (buffer == nullptr) return false;
     ++line_;
-    bool any = false;
-    for (;;) {
-      int c = 0;
-      try {
-        c = buffer->sbumpc();
-      } catch (const std::ios_base::failure& e) {
-        fail("cannot read: " + e.code().message());
-      }
-      if (c == std::char_traits<char>::eof()) {
-        in_.setstate(std::ios::eofbit);
-        if (!any) --line_;
-        return any;
-      }
-      any = true;
-      if (c == '\n') return true;
-      if (text_.size() == kMaxLogLineBytes) {
-        fail("line longer than " + std::to_string(kMaxLogLineBytes) +
-             " bytes (the format's limit, docs/log-format.md): not a fastslam log, or a scan "
-             "of more than " +
-             std::to_string(kMaxScanObservations) + " observations");
-      }
-      text_.push_back(static_cast<char>(c));
+    LineEnd end = LineEnd::kEndOfInput;
+    try {
+      end = read_bounded_line(in_, text_, kMaxLogLineBytes);
+    } catch (const std::runtime_error& e) {
+      fail(e.what());
     }
+    if (end == LineEnd::kTooLong) {
+      fail("line longer than " + std::to_string(kMaxLogLineBytes) +
+           " bytes (the format's limit, docs/log-format.md): not a fastslam log, or a scan "
+           "of more than " +
+           std::to_string(kMaxScanObservations) + " observations");
+    }
+    if (end == LineEnd::kEndOfInput && text_.empty()) {
+      --line_;
+      return false;
+    }
+    return true;
   }
 
   void fields(std::size_t n, const char* form) {
