@@ -380,7 +380,9 @@ void apply_json_config(CLI::App& cmd, const std::string& path) {
 
 void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::string& where) {
   if (!config.is_object()) throw std::runtime_error(where + ": expected one JSON object");
-  for (const auto& [key, value] : config.items()) {
+  for (const auto& item : config.items()) {
+    const std::string& key = item.key();
+    const nlohmann::json& value = item.value();
     auto fail = [&](const std::string& what) {
       throw std::runtime_error(where + ": key '" + clip(key) + "': " + what);
     };
