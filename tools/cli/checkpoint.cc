@@ -63,7 +63,7 @@ void put(std::ostream& out, const T& value) {
 
 void put_section(std::ostream& out, std::string_view bytes) {
   put<std::uint64_t>(out, bytes.size());
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  if (!bytes.empty()) out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }
 
 // Reads sections from the file's bytes, every length checked against what is left.
@@ -205,7 +205,7 @@ Checkpoint parse_checkpoint(const std::string& path, std::string_view bytes) {
   c.trace = std::string(body.section("trace"));
   const std::string_view poses = body.section("poses", sizeof(engine::TrajectoryPoint));
   c.poses.resize(poses.size() / sizeof(engine::TrajectoryPoint));
-  std::memcpy(c.poses.data(), poses.data(), poses.size());
+  if (!poses.empty()) std::memcpy(c.poses.data(), poses.data(), poses.size());
   for (std::size_t k = 0; k < c.poses.size(); ++k) {
     if (c.poses[k].control != k) body.fail("pose " + std::to_string(k) + " out of order");
   }

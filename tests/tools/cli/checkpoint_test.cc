@@ -96,6 +96,20 @@ TEST_F(CheckpointTest, RoundTripsEverySection) {
   EXPECT_TRUE(read.identity["build"].contains("commit"));
 }
 
+// A checkpoint before the first scan holds no poses: an empty section both ways
+// (fuzz/regressions/checkpoint_fuzzer/no_poses.body once passed memcpy a null pointer).
+TEST_F(CheckpointTest, ACheckpointWithoutPosesRoundTrips) {
+  const std::unique_ptr<engine::Filter> filter = small_filter();
+  Checkpoint c = sample(*filter);
+  c.poses.clear();
+  c.trace.clear();
+  write_checkpoint(path_, c, c.poses, *filter);
+  const Checkpoint read = read_checkpoint(path_);
+  EXPECT_TRUE(read.poses.empty());
+  EXPECT_TRUE(read.trace.empty());
+  EXPECT_EQ(read.scans, 5u);
+}
+
 TEST_F(CheckpointTest, RefusesEveryTruncationAndAlteration) {
   const std::unique_ptr<engine::Filter> filter = small_filter();
   const Checkpoint c = sample(*filter);
