@@ -20,6 +20,7 @@
 #include <streambuf>
 #include <string>
 #include <string_view>
+#include <sys/stat.h>
 #include <system_error>
 #include <unistd.h>
 #include <vector>
@@ -453,7 +454,16 @@ std::string replace_file(const std::string& path, std::string_view bytes) {
     const std::filesystem::path resolved = std::filesystem::weakly_canonical(path, ec);
     if (!ec) target = resolved.string();
   }
-  if (std::filesystem::is_directory(target, ec)) return "'" + path + "' is a directory";
+  // Only a regular file is replaced: a directory, a device (/dev/null, which root could
+  // otherwise rename a file over), a FIFO or a socket is refused.
+  struct stat st {};
+  const bool exists = ::stat(target.c_str(), &st) == 0;
+  if (exists && S_ISDIR(st.st_mode)) return "'" + path + "' is a directory";
+  if (exists && !S_ISREG(st.st_mode)) {
+    return "'" + path +
+           "' is not a regular file (a device, a FIFO or a socket); refusing to "
+           "replace it";
+  }
   const std::size_t slash = target.rfind('/');
   const std::string temp =
       (slash == std::string::npos ? std::string() : target.substr(0, slash + 1)) + "." +
@@ -461,6 +471,7 @@ std::string replace_file(const std::string& path, std::string_view bytes) {
       std::to_string(::getpid());
   const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
   if (fd < 0) return "cannot open '" + path + "' for writing: " + system_message(errno);
+  if (exists) (void)::fchmod(fd, st.st_mode & 07777);  // a replaced file keeps its permissions
   const auto give_up = [&](const char* what) {
     const std::string reason = system_message(errno);
     ::close(fd);

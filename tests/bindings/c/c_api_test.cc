@@ -602,6 +602,28 @@ TEST(CApi, FailedSaveLeavesThePreviousFileWhole) {
   std::filesystem::remove_all(dir);
 }
 
+// A save replaces a regular file keeping its permissions, and never a device or a directory.
+TEST(CApi, SaveReplacesOnlyRegularFilesAndKeepsTheirMode) {
+  Handle h = create(kKnownConfig);
+  const std::string path = temp_path("mode_state");
+  { std::ofstream(path) << "old"; }
+  std::filesystem::permissions(path, std::filesystem::perms(0640));
+  ASSERT_EQ(fastslam_save_file(h.get(), path.c_str()), FASTSLAM_OK) << fastslam_last_error(h.get());
+  EXPECT_EQ(std::filesystem::status(path).permissions(), std::filesystem::perms(0640));
+  const std::vector<unsigned char> bytes = save(h.get());
+  EXPECT_EQ(read_whole(path), std::string(bytes.begin(), bytes.end()));
+  std::filesystem::remove(path);
+  EXPECT_EQ(fastslam_save_file(h.get(), "/dev/null"), FASTSLAM_IO_ERROR);
+  EXPECT_NE(std::string(fastslam_last_error(h.get())).find("not a regular file"), std::string::npos)
+      << fastslam_last_error(h.get());
+  EXPECT_TRUE(std::filesystem::is_character_file("/dev/null"));
+  const std::string dir = temp_path("mode_dir");
+  std::filesystem::create_directories(dir);
+  EXPECT_EQ(fastslam_save_file(h.get(), dir.c_str()), FASTSLAM_IO_ERROR);
+  EXPECT_TRUE(std::filesystem::is_directory(dir));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(CApi, ErrorsBelongToTheirHandleAndThread) {
   Handle a = create(kKnownConfig);
   Handle b = create(kKnownConfig);
