@@ -15,26 +15,29 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tools/io/number_text.h"
+
 namespace fastslam::tools {
 namespace {
 
 void write_map_csv(AtomicFile& file, std::span<const engine::MapLandmark> map) {
   file.write("id,x,y,sxx,sxy,syy\n");
-  char line[200];
+  TextLine line;
   for (const engine::MapLandmark& l : map) {
-    std::snprintf(line, sizeof(line), "%llu,%.6f,%.6f,%.9g,%.9g,%.9g\n",
-                  static_cast<unsigned long long>(l.id), l.x, l.y, l.sxx, l.sxy, l.syy);
-    file.write(line);
+    line.clear();
+    line.integer(l.id).put(',').fixed(l.x, 6).put(',').fixed(l.y, 6).put(',');
+    line.general(l.sxx, 9).put(',').general(l.sxy, 9).put(',').general(l.syy, 9).put('\n');
+    file.write(line.view());
   }
 }
 
 void write_true_landmarks_csv(AtomicFile& file, std::span<const TruthLandmark> landmarks) {
   file.write("id,x,y\n");
-  char line[120];
+  TextLine line;
   for (const TruthLandmark& l : landmarks) {
-    std::snprintf(line, sizeof(line), "%llu,%.6f,%.6f\n", static_cast<unsigned long long>(l.id),
-                  l.x, l.y);
-    file.write(line);
+    line.clear();
+    line.integer(l.id).put(',').fixed(l.x, 6).put(',').fixed(l.y, 6).put('\n');
+    file.write(line.view());
   }
 }
 
@@ -75,27 +78,23 @@ TraceWriter::TraceWriter(const std::string& path, std::uint64_t every, bool keep
 void TraceWriter::row(double t, std::optional<double> pose_error, std::optional<double> map_error,
                       std::size_t landmarks, std::size_t observed,
                       const std::optional<ParticleDiagnostics>& particles) {
-  char line[400];
-  int n = std::snprintf(line, sizeof(line), "%.3f,%llu,", t,
-                        static_cast<unsigned long long>(scans_ - 1));
-  n += pose_error ? std::snprintf(line + n, sizeof(line) - n, "%.6f,", *pose_error)
-                  : std::snprintf(line + n, sizeof(line) - n, ",");
-  n += map_error ? std::snprintf(line + n, sizeof(line) - n, "%.6f,", *map_error)
-                 : std::snprintf(line + n, sizeof(line) - n, ",");
-  n += std::snprintf(line + n, sizeof(line) - n, "%zu,%zu,", landmarks, observed);
+  TextLine line;
+  line.fixed(t, 3).put(',').integer(scans_ - 1).put(',');
+  if (pose_error) line.fixed(*pose_error, 6);
+  line.put(',');
+  if (map_error) line.fixed(*map_error, 6);
+  line.put(',').integer(landmarks).put(',').integer(observed).put(',');
   if (particles) {
     const ParticleDiagnostics& d = *particles;
-    n += std::snprintf(line + n, sizeof(line) - n, "%.3f,%zu,%.6f,", d.effective_sample_size,
-                       d.distinct, d.spread);
-    n += d.truth_spreads ? std::snprintf(line + n, sizeof(line) - n, "%.3f,", *d.truth_spreads)
-                         : std::snprintf(line + n, sizeof(line) - n, ",");
-    n +=
-        d.nearest_weight ? std::snprintf(line + n, sizeof(line) - n, "%.6f", *d.nearest_weight) : 0;
+    line.fixed(d.effective_sample_size, 3).put(',').integer(d.distinct).put(',');
+    line.fixed(d.spread, 6).put(',');
+    if (d.truth_spreads) line.fixed(*d.truth_spreads, 3);
+    line.put(',');
+    if (d.nearest_weight) line.fixed(*d.nearest_weight, 6);
   } else {
-    n += std::snprintf(line + n, sizeof(line) - n, ",,,,");
+    line.text(",,,,");
   }
-  std::snprintf(line + n, sizeof(line) - n, "\n");
-  write(line);
+  write(line.put('\n').view());
 }
 
 void TraceWriter::write(std::string_view line) {

@@ -6,6 +6,8 @@
 #include <string_view>
 #include <utility>
 
+#include "tools/io/number_text.h"
+
 namespace fastslam::tools {
 
 // One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, written to its
@@ -35,12 +37,10 @@ class RunRecorder::PoseFile {
       append_tum(line_, p);
       file_.write(line_);
     } else {
-      char line[160];
-      const int n = format_ == Format::kCsv
-                        ? std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f,%.6f\n", p.time, p.x,
-                                        p.y, p.theta)
-                        : std::snprintf(line, sizeof(line), "%.3f,%.6f,%.6f\n", p.time, p.x, p.y);
-      file_.write(std::string_view(line, static_cast<std::size_t>(n)));
+      text_.clear();
+      text_.fixed(p.time, 3).put(',').fixed(p.x, 6).put(',').fixed(p.y, 6);
+      if (format_ == Format::kCsv) text_.put(',').fixed(p.theta, 6);
+      file_.write(text_.put('\n').view());
     }
   }
 
@@ -50,6 +50,7 @@ class RunRecorder::PoseFile {
   Format format_;
   AtomicFile file_;
   std::string line_;
+  TextLine text_;
 };
 
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
