@@ -379,7 +379,9 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
         case EventKind::kScan:
           located([&] {
             prepare_scan(loop, scan, r);
+            const auto t_scan = Clock::now();
             filter.observe(scan, event.time);
+            r.scan_latency.add(seconds_since(t_scan));
           });
           if (const std::optional<std::int64_t> id = loop.truth.see(scan);
               id && !r.unknown_id_seen) {

@@ -95,6 +95,13 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
         {"associate", st.associate_seconds},
         {"update", st.update_seconds},
         {"resample", st.resample_seconds}}},
+      {"scan_latency_ms",
+       {{"scans", r.scan_latency.count()},
+        {"p50", 1e3 * r.scan_latency.percentile(0.5)},
+        {"p90", 1e3 * r.scan_latency.percentile(0.9)},
+        {"p99", 1e3 * r.scan_latency.percentile(0.99)},
+        {"max", 1e3 * r.scan_latency.max()},
+        {"mean", 1e3 * r.scan_latency.mean()}}},
       {"resamples", st.resamples},
       {"log_evidence", st.log_evidence},
       {"live_tree_nodes", st.live_nodes},
@@ -224,6 +231,11 @@ void print_summary(const RunSettings& s, const RunResult& r, std::FILE* out) {
                r.filter_seconds, s.info.simulated ? "simulator" : "reading",
                r.open_seconds + r.source_seconds, r.open_seconds,
                static_cast<double>(peak_rss_bytes()) / 1e6);
+  if (r.scan_latency.count() > 0) {
+    std::fprintf(out, "  per scan: p50 %.3f ms, p99 %.3f ms, max %.3f ms\n",
+                 1e3 * r.scan_latency.percentile(0.5), 1e3 * r.scan_latency.percentile(0.99),
+                 1e3 * r.scan_latency.max());
+  }
   if (worse_than_dead_reckoning(r)) {
     std::fprintf(stderr,
                  "warning: the filter's position error is larger than dead reckoning's on the same "

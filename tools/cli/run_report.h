@@ -21,6 +21,7 @@
 #include "tools/cli/run_command.h"
 #include "tools/cli/run_recorder.h"
 #include "tools/datasets/source.h"
+#include "tools/eval/latency_histogram.h"
 #include "tools/eval/map_evaluation.h"
 #include "tools/eval/map_metrics.h"
 
@@ -48,6 +49,9 @@ struct RunResult {
   double open_seconds = 0.0;     // opening the source: reading and parsing a recorded one
   double source_seconds = 0.0;   // its events after that (for a simulator: simulating)
   double filter_seconds = 0.0;   // the filter, trace rows excluded
+  // Each scan's update (Filter::observe, what a streaming caller waits for per scan) in this
+  // process: after a resume, the scans since it.
+  LatencyHistogram scan_latency;
   // Or "--max-steps", "--max-seconds", "input error", "error", "SIGINT", "SIGTERM".
   std::string ended_by = "end of data";
   std::optional<std::string> input_error;  // the source's message, when it ended the run

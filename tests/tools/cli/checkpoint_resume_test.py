@@ -35,7 +35,7 @@ SMALL = ["--world", "grid", "--landmarks", "100", "--no-progress", "--no-plot"]
 # metrics.json keys that measure the process, not the result.
 PROCESS_KEYS = {"wall_seconds", "source_open_seconds", "source_seconds", "simulator_seconds",
                 "seconds_per_phase", "peak_rss_bytes", "live_tree_nodes", "live_tree_bytes",
-                "threads"}
+                "threads", "scan_latency_ms"}
 # options keys that change no result.
 EXECUTION_OPTIONS = {"threads", "out", "trace", "checkpoint", "checkpoint-every", "max-seconds"}
 

@@ -52,6 +52,14 @@ TEST(RunCommand, WebmapWritesTheContractedOutputs) {
   EXPECT_EQ(m["steps"], 17382);
   EXPECT_EQ(m["scans"], 1931);
   EXPECT_EQ(m["scan_period_s"], 0.2);  // Bailey's DT_OBSERVE: CSV worlds keep it
+  // One latency per scan, ordered; their mean times the count is within the filter's time.
+  const nlohmann::json& latency = m["scan_latency_ms"];
+  EXPECT_EQ(latency["scans"], 1931);
+  EXPECT_GT(latency["p50"].get<double>(), 0.0);
+  EXPECT_LE(latency["p50"].get<double>(), latency["p90"].get<double>());
+  EXPECT_LE(latency["p90"].get<double>(), latency["p99"].get<double>());
+  EXPECT_LE(latency["p99"].get<double>(), latency["max"].get<double>());
+  EXPECT_LE(latency["mean"].get<double>() * 1931 / 1e3, m["wall_seconds"].get<double>());
   EXPECT_EQ(m["particles"], 100);
   EXPECT_EQ(m["algorithm"], "fastslam1");
   EXPECT_GT(m["landmarks"].get<int>(), 25);
