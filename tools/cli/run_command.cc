@@ -15,6 +15,7 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <oneapi/tbb/info.h>
 
 #include "engine/angles.h"
 #include "engine/ekf_slam.h"
@@ -731,8 +732,11 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
                                                 resumed->trace, trace_scans)
                 : std::make_unique<TraceWriter>(options.trace, options.trace_every, checkpointing);
   }
+  // With a second thread, the poses are scored and written beside the filter.
+  const unsigned threads =
+      config.threads > 0 ? config.threads : unsigned(tbb::info::default_concurrency());
   RunRecorder recorder(info.header, tracked_point_offset(options, info.header), options.out,
-                       *resolved.rpe_delta);
+                       *resolved.rpe_delta, threads > 1);
   std::unique_ptr<ScanStream> stream;
   if (!options.stream.empty()) stream = std::make_unique<ScanStream>(options.stream);
   Checkpointing checkpoint{options.checkpoint, options.checkpoint_every, identity, {}};
