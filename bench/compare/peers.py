@@ -19,9 +19,11 @@ Peers:
                      resamples far less often than a filter with a threshold that scales with M.
 
     /usr/bin/python3 bench/compare/peers.py --build build/release --shared ../shared \\
-        --fasterslam /path/to/FasterSLAM/src --particles 100,1000 --rounds 5
+        --fasterslam /path/to/FasterSLAM/src --particles 100,1000 --threads 1,2 --rounds 5
 
-Prints a Markdown table; --json keeps every time.
+With more than one thread, `fastslam run` scores and writes its poses on a second thread
+(tools/cli/run_recorder.h) and splits the filter's passes when they are heavy enough. Prints a
+Markdown table; --json keeps every time and the summary rows.
 """
 
 import argparse
@@ -75,13 +77,18 @@ def cases(opts, scratch):
         sys.exit(77)
     out = []
     for m in opts.particles:
-        run = [fastslam, "run", *world, "--particles", str(m), "--threads", "1", "--no-progress"]
-        out_dir = os.path.join(scratch, f"out-{m}")
-        out.append(("fastslam run --out", m, run + ["--no-plot", "--out", out_dir], out_dir))
-        out.append(("fastslam run (no --out)", m, run + ["--no-plot"], None))
-        if opts.picture:
-            pic_dir = os.path.join(scratch, f"pic-{m}")
-            out.append(("fastslam run --out, with map.png", m, run + ["--out", pic_dir], None))
+        for t in opts.threads:
+            run = [fastslam, "run", *world, "--particles", str(m), "--threads", str(t),
+                   "--no-progress"]
+            out_dir = os.path.join(scratch, f"out-{m}-{t}")
+            out.append((f"fastslam run --out, {t} thread{'s' if t > 1 else ''}", m,
+                        run + ["--no-plot", "--out", out_dir], out_dir))
+            out.append((f"fastslam run (no --out), {t} thread{'s' if t > 1 else ''}", m,
+                        run + ["--no-plot"], None))
+            if opts.picture:
+                pic_dir = os.path.join(scratch, f"pic-{m}-{t}")
+                out.append((f"fastslam run --out with its picture, {t} "
+                            f"thread{'s' if t > 1 else ''}", m, run + ["--out", pic_dir], None))
         if opts.fasterslam:
             exe = os.path.join(opts.fasterslam, "build", "fastslam1", "FasterSlamExe")
             data = os.path.join(opts.fasterslam, "input_data", "example_webmap.mat")
@@ -90,7 +97,7 @@ def cases(opts, scratch):
                     sys.exit(f"peers.py: {path} is not there: --fasterslam is FasterSLAM's src/ "
                              "folder, built with `cmake -B build -DCMAKE_BUILD_TYPE=Release && "
                              "make -C build FasterSlamExe`")
-            out.append(("FasterSLAM", m, [exe, data, "1", str(m)], None))
+            out.append(("FasterSLAM (1 thread)", m, [exe, data, "1", str(m)], None))
     return out
 
 
@@ -100,12 +107,14 @@ def main():
     parser.add_argument("--shared", default="../shared", help="the folder holding data/")
     parser.add_argument("--fasterslam", help="FasterSLAM's src/ folder, built (see above)")
     parser.add_argument("--particles", default="100,1000", help="comma-separated M")
+    parser.add_argument("--threads", default="1", help="comma-separated thread counts")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--picture", action="store_true",
-                        help="also time the command with its default picture (map.png)")
+                        help="also time the command with its default picture")
     parser.add_argument("--json", help="write every time here")
     opts = parser.parse_args()
     opts.particles = [int(m) for m in opts.particles.split(",")]
+    opts.threads = [int(t) for t in opts.threads.split(",")]
     if opts.rounds < 1:
         sys.exit("peers.py: --rounds must be at least 1")
     scratch = tempfile.mkdtemp(prefix="fastslam-peers-")
@@ -129,25 +138,30 @@ def main():
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
 
+    peer = {m: statistics.median(wall[i]) for i, (name, m, _, _) in enumerate(todo)
+            if name.startswith("FasterSLAM")}
+    rows = []
+    for i, (name, m, cmd, _) in enumerate(todo):
+        w = statistics.median(wall[i])
+        rows.append({"particles": m, "program": name, "command": cmd,
+                     "wall_ms": w, "wall_min_ms": min(wall[i]),
+                     "cpu_ms": statistics.median(cpu[i]),
+                     "filter_ms": statistics.median(filt[i]) if filt[i] else None,
+                     "against_fasterslam": w / peer[m] if m in peer else None})
     print(f"Machine: {machine()}; median (min) of {opts.rounds} rounds, whole processes, "
-          "1 thread, webmap seed 1.\n")
+          "webmap seed 1.\n")
     print("| M | program | wall, ms | CPU, ms | filter loop inside, ms | wall / FasterSLAM's |")
     print("|---|---|---|---|---|---|")
-    peer = {m: statistics.median(wall[i]) for i, (name, m, _, _) in enumerate(todo)
-            if name == "FasterSLAM"}
-    for i, (name, m, _, _) in enumerate(todo):
-        w = statistics.median(wall[i])
-        inside = f"{statistics.median(filt[i]):.1f}" if filt[i] else ""
-        ratio = f"{w / peer[m]:.2f}" if m in peer else ""
-        print(f"| {m} | {name} | {w:.1f} ({min(wall[i]):.1f}) | {statistics.median(cpu[i]):.1f} "
-              f"| {inside} | {ratio} |")
+    for r in rows:
+        inside = f"{r['filter_ms']:.1f}" if r["filter_ms"] is not None else ""
+        ratio = f"{r['against_fasterslam']:.2f}" if r["against_fasterslam"] is not None else ""
+        print(f"| {r['particles']} | {r['program']} | {r['wall_ms']:.1f} ({r['wall_min_ms']:.1f}) "
+              f"| {r['cpu_ms']:.1f} | {inside} | {ratio} |")
     if opts.json:
         with open(opts.json, "w") as f:
-            json.dump({"machine": machine(), "rounds": opts.rounds,
-                       "cases": [{"name": n, "particles": m, "command": c, "wall_ms": wall[i],
-                                  "cpu_ms": cpu[i], "filter_ms": filt[i]}
-                                 for i, (n, m, c, _) in enumerate(todo)]}, f, indent=1)
-
+            json.dump({"machine": machine(), "rounds": opts.rounds, "rows": rows,
+                       "raw": [{"wall_ms": wall[i], "cpu_ms": cpu[i], "filter_ms": filt[i]}
+                               for i in range(len(todo))]}, f, indent=1)
 
 if __name__ == "__main__":
     main()

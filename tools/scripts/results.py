@@ -9,6 +9,8 @@ docs/results.json, so re-measuring one section leaves the others as they were me
     /usr/bin/python3 tools/scripts/results.py --run accuracy   # fastslam run over seeds
     /usr/bin/python3 tools/scripts/results.py --run speed      # benchmarks (an idle machine!)
     /usr/bin/python3 tools/scripts/results.py --run front-ends # the C API's and Python's cost
+    /usr/bin/python3 tools/scripts/results.py --run whole-process [--fasterslam DIR]
+                                               # the whole command beside FasterSLAM's
     /usr/bin/python3 tools/scripts/results.py                  # re-render from results.json
 
 Paths are relative to the repository root; ../shared must be beside it.
@@ -312,6 +314,28 @@ def render(data):
             lines.append(f"| {name} | {1e3 * v['median_seconds']:.2f} ms | "
                          f"{1e3 * v['min_seconds']:.2f} ms | {100 * v['overhead']:.1f} % |")
         lines.append("")
+    whole = data.get("whole_process")
+    if whole:
+        lines += ["## Whole process", "",
+                  f"Measured {whole['date']} on {whole['machine']}: the whole `fastslam run` "
+                  "command on Bailey's webmap, seed 1, FastSLAM 1.0 with known ids (start-up, "
+                  "simulator, filter, scoring, output files, and the picture where said), beside "
+                  "FasterSLAM's whole process on the same world (github.com/RomeoV/FasterSLAM, "
+                  "its optimised routine, built Release with its own CMake; it keeps its "
+                  "resampling threshold at 75 particles whatever M). Median (minimum) of "
+                  f"{whole['rounds']} rounds in rotating order; \"filter loop\" is metrics.json's "
+                  "`wall_seconds`. With two threads the run scores and writes its poses on a "
+                  "second thread.", "",
+                  f"`{whole['command']}`", "",
+                  "| M | program | wall, ms | CPU, ms | filter loop, ms | wall / FasterSLAM's |",
+                  "|---|---|---|---|---|---|"]
+        for r in whole["rows"]:
+            inside = f"{r['filter_ms']:.1f}" if r.get("filter_ms") is not None else ""
+            ratio = (f"{r['against_fasterslam']:.2f}" if r.get("against_fasterslam") is not None
+                     else "")
+            lines.append(f"| {r['particles']} | {r['program']} | {r['wall_ms']:.1f} "
+                         f"({r['wall_min_ms']:.1f}) | {r['cpu_ms']:.1f} | {inside} | {ratio} |")
+        lines.append("")
     return "\n".join(lines)
 
 
@@ -326,6 +350,24 @@ def measure_front_ends(build, repetitions):
     command = (f"/usr/bin/python3 bench/bindings/front_end_overhead.py build/release ../shared "
                f"--repeats {repetitions}")
     return {"command": command, "result": result}
+
+
+def measure_whole_process(build, repetitions, fasterslam):
+    script = os.path.join(ROOT, "bench", "compare", "peers.py")
+    args = ["--particles", "100,1000", "--threads", "1,2", "--rounds", str(repetitions),
+            "--picture"]
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "peers.json")
+        command = ["/usr/bin/python3", script, "--build", build, "--shared", SHARED, *args,
+                   "--json", out]
+        if fasterslam:
+            command += ["--fasterslam", fasterslam]
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+        with open(out) as f:
+            result = json.load(f)
+    shown = ("/usr/bin/python3 bench/compare/peers.py --build build/release --shared ../shared "
+             + " ".join(args) + (" --fasterslam FASTERSLAM/src" if fasterslam else ""))
+    return {"command": shown, "rows": result["rows"], "rounds": result["rounds"]}
 
 
 def readme_table(data):
@@ -353,8 +395,9 @@ def update_readme(data):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--run", choices=["accuracy", "speed", "front-ends", "all"],
-                        help="measure anew")
+    parser.add_argument("--run", choices=["accuracy", "speed", "front-ends", "whole-process",
+                                          "all"], help="measure anew")
+    parser.add_argument("--fasterslam", help="FasterSLAM's built src/ folder (whole-process)")
     parser.add_argument("--build", default=os.path.join(ROOT, "build", "release"))
     parser.add_argument("--jobs", type=int, default=2, help="seeds run at once (accuracy)")
     parser.add_argument("--repetitions", type=int, default=5, help="benchmark repetitions")
@@ -375,6 +418,9 @@ def main():
         data["speed"] = dict(stamp, tables=measure_speed(opts.build, opts.repetitions))
     if opts.run in ("front-ends", "all"):
         data["front_ends"] = dict(stamp, **measure_front_ends(opts.build, opts.repetitions))
+    if opts.run in ("whole-process", "all"):
+        data["whole_process"] = dict(stamp, **measure_whole_process(opts.build, opts.repetitions,
+                                                                    opts.fasterslam))
     with open(opts.json, "w") as f:
         json.dump(data, f, indent=1, sort_keys=True)
         f.write("\n")

@@ -48,6 +48,23 @@ class Render(unittest.TestCase):
         self.assertIn("example_webmap_waypoints.csv ARGS --seeds 1-10", text)
         self.assertNotIn("### Victoria Park", text)  # tables without measurements are left out
 
+    def test_whole_process_rows(self):
+        data = {"whole_process": {
+            "date": "2026-01-01", "machine": "test machine", "rounds": 5,
+            "command": "/usr/bin/python3 bench/compare/peers.py --rounds 5",
+            "rows": [{"particles": 100, "program": "fastslam run --out, 1 thread",
+                      "wall_ms": 50.0, "wall_min_ms": 48.25, "cpu_ms": 49.0, "filter_ms": 30.5,
+                      "against_fasterslam": 2.0},
+                     {"particles": 100, "program": "FasterSLAM (1 thread)", "wall_ms": 25.0,
+                      "wall_min_ms": 24.0, "cpu_ms": 24.5, "filter_ms": None,
+                      "against_fasterslam": 1.0}]}}
+        text = results.render(data)
+        self.assertIn("## Whole process", text)
+        self.assertIn("| 100 | fastslam run --out, 1 thread | 50.0 (48.2) | 49.0 | 30.5 | 2.00 |",
+                      text)
+        self.assertIn("| 100 | FasterSLAM (1 thread) | 25.0 (24.0) | 24.5 |  | 1.00 |", text)
+        self.assertIn("`/usr/bin/python3 bench/compare/peers.py --rounds 5`", text)
+
     def test_readme_table(self):
         table = results.readme_table(self.fixture())
         self.assertIn("| Bailey's webmap: FastSLAM 1.0, known ids | pose RMSE, m | "
