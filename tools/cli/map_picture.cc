@@ -903,7 +903,6 @@ std::vector<std::string> title_lines(const nlohmann::json& m) {
 void draw(const Run& run, AtomicFile& file) {
   const std::vector<std::string> title = title_lines(run.metrics);
   const bool two = run.zoom.has_value();
-  const bool legend_below = !run.small;
 
   // The main panel's series, in plot_run.py's order (landmarks under the paths) and styles.
   const bool small = run.small;
@@ -936,9 +935,13 @@ void draw(const Run& run, AtomicFile& file) {
   }
   if (!run.aligned.empty()) entries.push_back({"estimated path, rigidly aligned", aligned_style});
   if (two) entries.push_back({"zoomed window", window_style});
-  const Legend legend(entries, legend_below ? 3 : 1);
-
   Panel main = fit(run.extent, two ? 760 : 880, 0.05);
+  // Inside the panel for a small map, as matplotlib's loc="best", unless it does not fit
+  // there; below it in up to three columns otherwise.
+  const Legend inside(entries, 1);
+  const bool legend_below =
+      !run.small || inside.width > main.width - 16 || inside.height > main.height - 16;
+  const Legend legend = legend_below ? Legend(entries, 3) : inside;
   std::optional<Panel> zoom_panel;
   std::optional<Legend> zoom_legend;
   std::vector<std::string> caption;

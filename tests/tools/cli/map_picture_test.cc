@@ -253,6 +253,39 @@ TEST_F(MapPicture, LandmarksLandOnTheirTicks) {
   EXPECT_NEAR(std::stod(f[6]), -45, 0.05);
 }
 
+// The legend goes inside a small map's panel, where it covers least, unless it does not fit
+// there (a narrow panel): then below it, as for a large map.
+TEST_F(MapPicture, TheLegendGoesInsideTheMapOrBelowIt) {
+  const auto rect_after = [](const std::string& svg, const std::string& marker) {
+    std::smatch m;
+    const std::size_t at = svg.find(marker);
+    EXPECT_NE(at, std::string::npos) << marker;
+    const std::string rest = svg.substr(at, 400);
+    EXPECT_TRUE(std::regex_search(rest, m,
+                                  std::regex("<rect x=\"([-0-9.]+)\" y=\"([-0-9.]+)\" "
+                                             "width=\"([-0-9.]+)\" height=\"([-0-9.]+)\"")))
+        << rest;
+    return std::vector<double>{std::stod(m[1]), std::stod(m[2]), std::stod(m[3]), std::stod(m[4])};
+  };
+  write_path("truth.csv", 100, 40);
+  write_landmarks("landmarks.csv", 20, true);
+  std::string svg = draw();
+  std::vector<double> panel = rect_after(svg, "<clipPath id=\"map-clip\">");
+  std::vector<double> legend = rect_after(svg, "<g id=\"legend\"");
+  EXPECT_GE(legend[0], panel[0]);
+  EXPECT_GE(legend[1], panel[1]);
+  EXPECT_LE(legend[0] + legend[2], panel[0] + panel[2]);
+  EXPECT_LE(legend[1] + legend[3], panel[1] + panel[3]);
+
+  // A path 1 m wide and 100 m tall: a panel a quarter as wide as it is tall.
+  write("truth.csv", "t,x,y,theta\n0,0,0,0\n1,1,100,0\n");
+  svg = draw();
+  panel = rect_after(svg, "<clipPath id=\"map-clip\">");
+  legend = rect_after(svg, "<g id=\"legend\"");
+  EXPECT_NEAR(panel[2] * 4, panel[3], 0.02);
+  EXPECT_GT(legend[1], panel[1] + panel[3]);
+}
+
 // A long run's paths are thinned to the bound, first and last poses kept; the file stays
 // small whatever the length.
 TEST_F(MapPicture, PathsOfAMillionPosesAreThinnedToTheBound) {
