@@ -15,5 +15,5 @@ if [ $# -gt 0 ]; then
   exec build/release/tools/fastslam "$@"
 fi
 # The built-in default: a stress run over 10^5 landmarks with 100 particles (`fastslam run --help`).
-# It writes out/run/{metrics.json,trajectory.csv,...} and draws out/run/map.png (tools/scripts/plot_run.py).
+# It writes out/run/{metrics.json,trajectory.csv,...} and draws out/run/map.svg (--plot png: map.png).
 build/release/tools/fastslam run --out out/run

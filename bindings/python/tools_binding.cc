@@ -40,7 +40,7 @@ constexpr const char* kRefused[] = {"seeds", "config"};
 // picture unless asked for. Throws std::invalid_argument naming a bad option.
 tools::RunOptions run_options(const char* function, const py::object& log_path,
                               const py::kwargs& kwargs) {
-  nlohmann::json options = {{"no-progress", true}, {"no-plot", true}};
+  nlohmann::json options = {{"no-progress", true}};
   if (!log_path.is_none()) {
     const std::string path = path_string(log_path);
     if (!std::filesystem::exists(path)) raise_file_not_found(path);
@@ -73,6 +73,7 @@ tools::RunOptions run_options(const char* function, const py::object& log_path,
     }
     options[flag] = std::move(v);
   }
+  if (!options.contains("plot") && !options.contains("no-plot")) options["plot"] = "none";
   const char* argv[] = {function};
   app.parse(1, argv);
   try {
@@ -152,8 +153,9 @@ void bind_tools(py::module_& m) {
 for '-' (particles=200, algorithm="fastslam2", association="ml", seed=3, out="dir", ...); a flag
 without a value takes True. With log_path None, `source` (and its options) say what to run,
 e.g. run(source="sim", world="loop"). No progress bar and no picture unless no_progress=False /
-no_plot=False; verbose=True prints the command line's summary. ValueError for an unknown option
-or a bad value, FileNotFoundError for a missing log, RuntimeError for an unreadable one.)doc");
+plot="svg" (or "png", or no_plot=False for the default svg); verbose=True prints the command
+line's summary. ValueError for an unknown option or a bad value, FileNotFoundError for a missing
+log, RuntimeError for an unreadable one.)doc");
 
   m.def(
       "run_config",

@@ -42,7 +42,7 @@ EARLIER = None  # a directory holding an earlier run (and a notes.txt of the use
 
 # What `fastslam run --out` may write (tools/cli/run_output.h, kRunFileNames).
 RUN_FILES = ["metrics.json", "trajectory.csv", "trajectory.tum", "truth.csv", "gps.csv",
-             "dead_reckoning.csv", "landmarks.csv", "true_landmarks.csv", "map.png"]
+             "dead_reckoning.csv", "landmarks.csv", "true_landmarks.csv", "map.svg", "map.png"]
 LOG_RUN = ["run", "--source", "log", "--data", "{log}", "--out", "{out}", "--no-progress",
            "--no-plot"]
 SMALL = ["run", "--world", "grid", "--landmarks", "100", "--max-steps", "20", "--no-progress",

@@ -22,8 +22,9 @@ static_assert(sizeof(engine::TrajectoryPoint) == 32, "poses are saved as 32-byte
 
 // Options that change no result: a run resumed with other values ends with the same files.
 constexpr const char* kExecutionOptions[] = {
-    "threads",     "grain",      "split-seconds", "out",     "trace",      "stream",
-    "max-seconds", "max-memory", "no-progress",   "no-plot", "checkpoint", "checkpoint-every"};
+    "threads", "grain",       "split-seconds",   "out",         "trace",
+    "stream",  "max-seconds", "max-memory",      "no-progress", "plot",
+    "no-plot", "checkpoint",  "checkpoint-every"};
 
 // Forwards every byte to `sink` and the hash.
 class HashingBuffer : public std::streambuf {

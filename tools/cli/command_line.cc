@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <sys/resource.h>
 #include <thread>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -380,6 +381,14 @@ void apply_json_config(CLI::App& cmd, const std::string& path) {
 
 void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::string& where) {
   if (!config.is_object()) throw std::runtime_error(where + ": expected one JSON object");
+  // The options given on the command line, and those they exclude (--plot and --no-plot):
+  // the file's values for them are passed over.
+  std::set<const CLI::Option*> given;
+  for (const CLI::Option* option : std::as_const(cmd).get_options()) {
+    if (option->count() == 0) continue;
+    given.insert(option);
+    for (const CLI::Option* other : option->get_excludes()) given.insert(other);
+  }
   for (const auto& item : config.items()) {
     const std::string& key = item.key();
     const nlohmann::json& value = item.value();
@@ -388,8 +397,8 @@ void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::s
     };
     CLI::Option* option = key == "config" ? nullptr : cmd.get_option_no_throw("--" + key);
     if (option == nullptr) fail("unknown option (keys are the long flag names without '--')");
-    if (option->count() > 0) continue;  // given on the command line: the flag wins
-    if (value.is_null()) continue;      // unset, as metrics.json's "options" writes "none"
+    if (given.contains(option)) continue;  // the command line wins
+    if (value.is_null()) continue;         // unset, as metrics.json's "options" writes "none"
     std::string text;
     if (value.is_string()) {
       text = value.get<std::string>();
@@ -460,6 +469,13 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
     throw std::invalid_argument(
         "--data - (standard input) can be read once; --checkpoint and --resume need a file "
         "that can be read again");
+  }
+  if (cmd.get_option_no_throw("--plot") != nullptr) {
+    // Both can come from one config file (or the Python module's arguments).
+    if (w.no_plot && given("--plot") && w.plot != "none") {
+      throw std::invalid_argument("--no-plot and --plot " + w.plot + " contradict: give one");
+    }
+    o.plot = w.no_plot ? "none" : w.plot;
   }
   if (given("--match-radius")) o.match_radius = w.match_radius;
   if (given("--rpe-delta")) o.rpe_delta = w.rpe_delta;
@@ -614,10 +630,15 @@ void add_output_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "outputs are those of an uninterrupted run");
   cmd.add_flag("!--no-progress", o.progress, "no progress bar (it shows only on a terminal)");
   o.plot_script = default_plot_script();
-  cmd.add_flag_callback(
-      "--no-plot", [&o] { o.plot_script.clear(); },
-      "with --out: no map.png (drawn by tools/scripts/plot_run.py with matplotlib, or "
-      "$FASTSLAM_PLOT_SCRIPT)");
+  CLI::Option* plot =
+      cmd.add_option("--plot", w.plot,
+                     "with --out, the map picture: svg (map.svg, drawn natively), png (map.png, "
+                     "by tools/scripts/plot_run.py or $FASTSLAM_PLOT_SCRIPT with matplotlib, "
+                     "about a second) or none")
+          ->check(CLI::IsMember(
+              std::vector<std::string>(std::begin(kPlotFormats), std::end(kPlotFormats))))
+          ->capture_default_str();
+  cmd.add_flag("--no-plot", w.no_plot, "with --out, no map picture (--plot none)")->excludes(plot);
   add_config_option(cmd, w);
 }
 

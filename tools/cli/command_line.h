@@ -6,8 +6,9 @@
 // Config files: one JSON object whose keys are the long flag names without the dashes
 // ("particles", "landmarks-csv", "no-progress", ...), values numbers, strings or booleans (null:
 // not set, as metrics.json's "options" writes an option that means "none"). A
-// flag given on the command line wins over the file; an unknown key, a nested value or a value
-// the flag's check refuses is an error naming the file and the key.
+// flag given on the command line wins over the file (--plot over the file's "no-plot" and
+// --no-plot over its "plot" too); an unknown key, a nested value or a value the flag's check
+// refuses is an error naming the file and the key.
 //
 // Ownership: the App borrows the options it binds, which must outlive parsing.
 // Thread safety: thread-compatible. Costs: negligible.
@@ -41,7 +42,9 @@ struct RunWords {
   double initial_heading_deg = 0;
   double vp_min_bearing_deg = 0, vp_max_bearing_deg = 0;  // given or not: the gate's defaults
   double vp_laser_yaw_deg = 0;
-  std::string config;  // --config FILE.json
+  std::string config;        // --config FILE.json
+  std::string plot = "svg";  // --plot, unless --no-plot
+  bool no_plot = false;
 };
 
 // Binds the options of `fastslam run` (sources, world, filter, noise overrides, outputs).
@@ -68,8 +71,9 @@ void apply_json_config(CLI::App& cmd, const std::string& path);
 void apply_json_config(CLI::App& cmd, const nlohmann::json& config, const std::string& where);
 
 // After parsing (and the config): the words into enums, the loops default, the noise overrides
-// that were given. Reads `cmd` to see which options were given. Throws std::invalid_argument
-// for `--out ""` and for more threads than max_startable_threads().
+// that were given, the picture (--plot, --no-plot). Reads `cmd` to see which options were given.
+// Throws std::invalid_argument for `--out ""`, for more threads than max_startable_threads()
+// and for --no-plot with a --plot other than none.
 void finish_run_options(const CLI::App& cmd, const RunWords& words, RunOptions& options);
 
 }  // namespace fastslam::tools

@@ -804,7 +804,9 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
                                                           text);
     if (!more.empty() && !r.failure) r.failure = more.front();
     errors.insert(errors.end(), more.begin(), more.end());
-    if (errors.empty() && !options.plot_script.empty()) {
+    if (errors.empty() && options.plot == "svg") {
+      draw_map_svg(options.out, options.quiet ? nullptr : text);
+    } else if (errors.empty() && options.plot == "png" && !options.plot_script.empty()) {
       draw_map(options.plot_script, options.out, text);
     }
   }

@@ -58,6 +58,9 @@ struct AssociationChoice {
 AssociationChoice resolve_association(const std::string& mode, const SourceInfo& info,
                                       const FilterDefaults& defaults);
 
+// --plot: the run's picture (RunOptions::plot).
+inline constexpr const char* kPlotFormats[] = {"svg", "png", "none"};
+
 struct RunOptions {
   std::string source = "sim";  // a name in the registry (tools/datasets/source.h)
   std::string data;            // a recorded source's file or directory
@@ -128,10 +131,13 @@ struct RunOptions {
   // the uninterrupted run would have written. Empty: start at the beginning.
   std::string resume;
   bool progress = true;  // a progress bar on stderr when it is a terminal
-  // With `out`: the matplotlib script run as `/usr/bin/python3 SCRIPT OUT` after the files are
-  // written, to draw OUT/map.png (the command line sets tools/scripts/plot_run.py unless
-  // --no-plot). Empty: no picture. A failing script is reported on stderr and does not fail the
-  // run.
+  // With `out`, the picture drawn once the files are written (one of kPlotFormats): "svg",
+  // OUT/map.svg drawn natively (tools/cli/map_picture.h, milliseconds; the command line's
+  // default); "png", OUT/map.png by `/usr/bin/python3 plot_script OUT` (matplotlib, about a
+  // second; nothing when plot_script is empty); "none". A picture that fails is reported on
+  // stderr and does not fail the run.
+  std::string plot = "none";
+  // The command line sets default_plot_script().
   std::string plot_script;
   // No summary on stdout (the Python module's run(), whose caller reads the metrics).
   bool quiet = false;

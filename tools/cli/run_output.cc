@@ -15,6 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tools/cli/map_picture.h"
 #include "tools/io/number_text.h"
 
 namespace fastslam::tools {
@@ -249,6 +250,16 @@ std::vector<std::string> write_run_files(const std::string& dir, const RunFiles&
   if (!files.quiet && !list.empty())
     std::fprintf(out, "  wrote %s/{%s}\n", dir.c_str(), list.c_str());
   return errors;
+}
+
+void draw_map_svg(const std::string& dir, std::FILE* out) {
+  try {
+    write_map_svg(dir);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "warning: map.svg not drawn: %s\n", e.what());
+    return;
+  }
+  if (out != nullptr) std::fprintf(out, "  wrote %s/map.svg\n", dir.c_str());
 }
 
 void draw_map(const std::string& script, const std::string& dir, std::FILE* out) {

@@ -1,9 +1,9 @@
 // What `fastslam run` writes: the output directory checked and cleared of an earlier run's
 // files before any work; at the end landmarks.csv, true_landmarks.csv (when the source has
 // them) and, last, metrics.json, beside the files streamed while it ran
-// (tools/cli/run_recorder.h); the `--trace` CSV of errors over time; and the map picture drawn
-// by a plot script. Every file goes through tools/io/atomic_file.h: it appears whole or not at
-// all.
+// (tools/cli/run_recorder.h); the `--trace` CSV of errors over time; and the map picture,
+// map.svg drawn natively (tools/cli/map_picture.h) or map.png by a plot script. Every file goes
+// through tools/io/atomic_file.h: it appears whole or not at all.
 //
 // Ownership: borrows its inputs for the call; TraceWriter owns its file.
 // Thread safety: thread-compatible. Costs: O(rows written); draw_map waits for the script.
@@ -70,7 +70,7 @@ class TraceWriter {
 // mixes two runs.
 inline constexpr const char* kRunFileNames[] = {
     "metrics.json",       "trajectory.csv", "trajectory.tum",     "truth.csv", "gps.csv",
-    "dead_reckoning.csv", "landmarks.csv",  "true_landmarks.csv", "map.png"};
+    "dead_reckoning.csv", "landmarks.csv",  "true_landmarks.csv", "map.svg",   "map.png"};
 
 // Checks `dir` before a run does any work: refuses (std::runtime_error "--out DIR: ...") a
 // path that is not a directory, cannot be created or written, is one of `inputs` or lies
@@ -122,6 +122,11 @@ struct RunFiles {
 // it becomes "failed: MESSAGE" in the metrics.json written after it.
 std::vector<std::string> write_run_files(const std::string& dir, const RunFiles& files,
                                          std::FILE* out = stdout);
+
+// Draws DIR/map.svg from the run's files in DIR (tools/cli/map_picture.h) and says so on `out`
+// unless it is null. The run's results stand whatever happens, so a failure (a malformed file,
+// named with its line) is a warning on stderr.
+void draw_map_svg(const std::string& dir, std::FILE* out);
 
 // Runs `/usr/bin/python3 SCRIPT DIR`. The run's results stand whatever it does, so a failure
 // is a warning on stderr naming the command and its exit status.

@@ -133,7 +133,8 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"checkpoint-every", o.checkpoint_every},
       {"max-memory", o.max_memory},
       {"no-progress", !o.progress},
-      {"no-plot", o.plot_script.empty()},
+      {"plot", o.plot},
+      {"no-plot", o.plot == "none"},
   };
   if (!o.seeds.empty()) j["seeds"] = o.seeds;
   return j;

@@ -3,13 +3,13 @@
 #include <charconv>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
 #include <ios>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <utility>
 
-#include "tools/io/bounded_line.h"
 #include "tools/io/log_format.h"
 
 namespace fastslam::tools {
@@ -20,18 +20,6 @@ std::string_view trim(std::string_view s) {
   while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r'))
     s.remove_suffix(1);
   return s;
-}
-
-std::vector<std::string_view> split(std::string_view line) {
-  std::vector<std::string_view> fields;
-  std::size_t start = 0;
-  for (;;) {
-    const std::size_t comma = line.find(',', start);
-    fields.push_back(trim(line.substr(start, comma - start)));
-    if (comma == std::string_view::npos) break;
-    start = comma + 1;
-  }
-  return fields;
 }
 
 // A field for a message: its first 80 bytes (control bytes as \xNN), then its length when
@@ -63,9 +51,9 @@ CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
     : path_(std::move(path)), columns_(std::move(columns)), in_(path_) {
   if (!in_) throw std::runtime_error(path_ + ": cannot open for reading");
   if (!read_line()) fail("empty file, expected a header line");
-  const std::vector<std::string_view> header = split(text_);
-  bool same = header.size() == columns_.size();
-  for (std::size_t i = 0; same && i < header.size(); ++i) same = header[i] == columns_[i];
+  split();
+  bool same = fields_.size() == columns_.size();
+  for (std::size_t i = 0; same && i < fields_.size(); ++i) same = fields_[i] == columns_[i];
   if (!same) {
     std::string expected;
     for (const std::string& c : columns_) expected += (expected.empty() ? "" : ",") + c;
@@ -76,13 +64,13 @@ CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
 bool CsvReader::next(std::span<double> out) {
   while (read_line()) {
     if (trim(text_).empty()) continue;
-    const std::vector<std::string_view> fields = split(text_);
-    if (fields.size() != columns_.size()) {
+    split();
+    if (fields_.size() != columns_.size()) {
       fail("expected " + std::to_string(columns_.size()) + " columns, found " +
-           std::to_string(fields.size()));
+           std::to_string(fields_.size()));
     }
-    for (std::size_t i = 0; i < fields.size(); ++i) {
-      const std::string_view f = fields[i];
+    for (std::size_t i = 0; i < fields_.size(); ++i) {
+      const std::string_view f = fields_[i];
       double value = 0.0;
       const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
       if (f.empty() || ec != std::errc() || end != f.data() + f.size()) {
@@ -100,21 +88,55 @@ bool CsvReader::next(std::span<double> out) {
 
 bool CsvReader::read_line() {
   ++line_;
-  LineEnd end = LineEnd::kEndOfInput;
+  text_.clear();
+  for (;;) {
+    if (next_ == end_ && !fill()) {
+      if (!text_.empty()) return true;  // a last line without its newline
+      --line_;
+      return false;
+    }
+    const char* const start = block_.data() + next_;
+    const char* const newline = static_cast<const char*>(std::memchr(start, '\n', end_ - next_));
+    const std::size_t n =
+        newline != nullptr ? static_cast<std::size_t>(newline - start) : end_ - next_;
+    if (text_.size() + n > kMaxLogLineBytes) {
+      fail("line longer than " + std::to_string(kMaxLogLineBytes) +
+           " bytes (the limit of a line, as for a log): not a CSV file of numbers");
+    }
+    text_.append(start, n);
+    next_ += n;
+    if (newline != nullptr) {
+      ++next_;
+      return true;
+    }
+  }
+}
+
+bool CsvReader::fill() {
+  constexpr std::size_t kBlock = std::size_t{1} << 16;
+  block_.resize(kBlock);
+  std::streamsize got = 0;
+  // The file buffer throws for a read the system refuses (a directory).
   try {
-    end = read_bounded_line(in_, text_, kMaxLogLineBytes);
-  } catch (const std::runtime_error& e) {
-    fail(e.what());
+    got = in_.rdbuf()->sgetn(block_.data(), static_cast<std::streamsize>(kBlock));
+  } catch (const std::ios_base::failure& e) {
+    fail("cannot read: " + e.code().message());
   }
-  if (end == LineEnd::kTooLong) {
-    fail("line longer than " + std::to_string(kMaxLogLineBytes) +
-         " bytes (the limit of a line, as for a log): not a CSV file of numbers");
+  next_ = 0;
+  end_ = got > 0 ? static_cast<std::size_t>(got) : 0;
+  return end_ > 0;
+}
+
+void CsvReader::split() {
+  fields_.clear();
+  const std::string_view line = text_;
+  std::size_t start = 0;
+  for (;;) {
+    const std::size_t comma = line.find(',', start);
+    fields_.push_back(trim(line.substr(start, comma - start)));
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
   }
-  if (end == LineEnd::kEndOfInput && text_.empty()) {
-    --line_;
-    return false;
-  }
-  return true;
 }
 
 void CsvReader::fail(const std::string& what) const {

@@ -90,9 +90,19 @@ def test_run_writes_files(loop_log, tmp_path):
     metrics = fastslam.run(loop_log, particles=10, out=tmp_path / "out")
     assert (tmp_path / "out" / "metrics.json").exists()
     assert (tmp_path / "out" / "trajectory.csv").exists()
-    assert not (tmp_path / "out" / "map.png").exists()  # no picture unless no_plot=False
+    # No picture unless asked for (plot="svg", or no_plot=False for the command line's svg).
+    assert not (tmp_path / "out" / "map.svg").exists()
+    assert not (tmp_path / "out" / "map.png").exists()
     assert json.loads((tmp_path / "out" / "metrics.json").read_text())["particles"] == \
         metrics["particles"]
+    assert metrics["options"]["plot"] == "none"
+    for options in (dict(plot="svg"), dict(no_plot=False)):
+        metrics = fastslam.run(loop_log, particles=10, out=tmp_path / "svg", **options)
+        assert (tmp_path / "svg" / "map.svg").read_text().startswith("<?xml")
+        assert not (tmp_path / "svg" / "map.png").exists()
+        assert metrics["options"]["plot"] == "svg"
+    with pytest.raises(ValueError, match="contradict"):
+        fastslam.run(loop_log, out=tmp_path / "x", plot="svg", no_plot=True)
 
 
 def test_run_without_a_log(shared_dir):

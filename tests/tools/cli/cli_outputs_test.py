@@ -10,7 +10,7 @@ files removed and nothing else; SIGINT and SIGTERM mid-run (exit 130 / 143, "sta
 temporaries; an evaluation problem kept as a warning; convert through a symlink, refusing a
 device, a link to one and a directory, and leaving nothing when stopped; the end marker convert
 writes, a log cut before it run with a warning (from a file and from a pipe), a record after it
-refused.
+refused. And the picture: map.svg unless --plot says otherwise, for each seed of a sweep too.
 
 Usage: cli_outputs_test.py FASTSLAM_BINARY
 """
@@ -38,7 +38,7 @@ SMALL = ["--world", "grid", "--landmarks", "100", "--max-steps", "20", "--no-pro
 # The built-in stress run, long enough to be stopped.
 LONG = ["run", "--max-steps", "100000000", "--no-progress", "--no-plot"]
 RUN_FILES = ["metrics.json", "trajectory.csv", "trajectory.tum", "truth.csv", "gps.csv",
-             "dead_reckoning.csv", "landmarks.csv", "true_landmarks.csv", "map.png"]
+             "dead_reckoning.csv", "landmarks.csv", "true_landmarks.csv", "map.svg", "map.png"]
 
 # (name, arguments ({dir}: a scratch directory), files made first (a name ending in / is a
 # directory), fragment of stderr). Each must exit 1 within 5 s.
@@ -147,7 +147,7 @@ class Outputs(unittest.TestCase):
                 f.write(HEADER + "control 0.1 0.1 1 0\nscan 0.1 1 5 0.1 -\n")
             out = os.path.join(d, "out")
             os.makedirs(out)
-            stale = RUN_FILES + [".trajectory.csv.tmp-1", ".map.png.tmp-77"]
+            stale = RUN_FILES + [".trajectory.csv.tmp-1", ".map.png.tmp-77", ".map.svg.tmp-78"]
             for name in stale + ["notes.txt", ".truth.csv.bak"]:
                 with open(os.path.join(out, name), "w") as f:
                     f.write("an earlier run\n")
@@ -315,6 +315,36 @@ class Outputs(unittest.TestCase):
                 log + ":11 (scan 2, t = 0.200 s): landmark id 7 is not among the source's true "
                 "landmarks",
                 "landmark evaluation: estimated landmark id 7 is not a true landmark"])
+
+
+    def test_the_picture_is_svg_unless_told(self):
+        """map.svg by default (also for each seed of a sweep), map.png only on request (not
+        drawn here: plot_run_test covers it), none with --plot none; metrics.json says which."""
+        import xml.etree.ElementTree as ElementTree
+        small = [a for a in SMALL if a != "--no-plot"]
+        with tempfile.TemporaryDirectory() as d:
+            out = os.path.join(d, "out")
+            r = run(["run"] + small + ["--out", out])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertIn("wrote " + out + "/map.svg", r.stdout)
+            self.assertFalse(os.path.exists(os.path.join(out, "map.png")))
+            root = ElementTree.parse(os.path.join(out, "map.svg")).getroot()
+            self.assertEqual(root.tag, "{http://www.w3.org/2000/svg}svg")
+            self.assertEqual(read_metrics(out)["options"]["plot"], "svg")
+            self.assertFalse(read_metrics(out)["options"]["no-plot"])
+            r = run(["run"] + small + ["--out", out, "--plot", "none"])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertNotIn("map.svg", r.stdout)
+            self.assertFalse(os.path.exists(os.path.join(out, "map.svg")))
+            self.assertEqual(read_metrics(out)["options"]["plot"], "none")
+            sweep = os.path.join(d, "sweep")
+            r = run(["run"] + small + ["--seeds", "1-2", "--out", sweep])
+            self.assertEqual(r.returncode, 0, r.stderr)
+            for seed in ("seed-1", "seed-2"):
+                ElementTree.parse(os.path.join(sweep, seed, "map.svg"))
+            r = run(["run"] + small + ["--out", out, "--plot", "png", "--no-plot"])
+            self.assertNotEqual(r.returncode, 0)  # CLI11's own code for a usage error
+            self.assertIn("--plot excludes --no-plot", r.stderr)
 
 
 class Convert(unittest.TestCase):

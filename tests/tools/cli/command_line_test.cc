@@ -258,7 +258,7 @@ TEST_F(CommandLine, AJsonObjectInMemoryActsAsAConfigFile) {
   finish_run_options(app, w, o);
   EXPECT_EQ(o.filter.particles, 12u);
   EXPECT_EQ(o.filter.seed, 4u);  // given on the command line: it wins
-  EXPECT_TRUE(o.plot_script.empty());
+  EXPECT_EQ(o.plot, "none");
   EXPECT_TRUE(o.progress);
   ASSERT_TRUE(o.model.sigma_range.has_value());
   EXPECT_EQ(*o.model.sigma_range, 0.5);
@@ -317,13 +317,31 @@ TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
   EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
 }
 
-// `fastslam run --out` draws map.png unless --no-plot (tools/cli/run_command.h).
-TEST_F(CommandLine, PlotScriptUnlessNoPlot) {
+// `fastslam run --out` draws map.svg unless --plot says png or none; --no-plot is --plot none
+// (tools/cli/run_command.h).
+TEST_F(CommandLine, PlotIsSvgUnlessToldOtherwise) {
   RunOptions o = run("{}", "");
+  EXPECT_EQ(o.plot, "svg");
   EXPECT_EQ(o.plot_script, default_plot_script());
   EXPECT_NE(o.plot_script.find("plot_run.py"), std::string::npos);
-  EXPECT_TRUE(run("{}", "--no-plot").plot_script.empty());
-  EXPECT_TRUE(run(R"({"no-plot": true})", "").plot_script.empty());
+  EXPECT_EQ(run("{}", "--plot png").plot, "png");
+  EXPECT_EQ(run("{}", "--plot none").plot, "none");
+  EXPECT_EQ(run("{}", "--no-plot").plot, "none");
+  EXPECT_EQ(run(R"({"no-plot": true})", "").plot, "none");
+  EXPECT_EQ(run(R"({"no-plot": false})", "").plot, "svg");
+  EXPECT_EQ(run(R"({"plot": "png"})", "").plot, "png");
+  // The command line wins over the file's other spelling too.
+  EXPECT_EQ(run(R"({"no-plot": true})", "--plot png").plot, "png");
+  EXPECT_EQ(run(R"({"plot": "png"})", "--no-plot").plot, "none");
+  // A metrics.json's options say both, in agreement.
+  EXPECT_EQ(run(R"({"no-plot": true, "plot": "none"})", "").plot, "none");
+  EXPECT_EQ(run(R"({"no-plot": false, "plot": "png"})", "").plot, "png");
+  std::string e = error_of(R"({"no-plot": true, "plot": "png"})");
+  EXPECT_NE(e.find("--no-plot and --plot png contradict"), std::string::npos) << e;
+  e = error_of("{}", "--plot png --no-plot");
+  EXPECT_NE(e.find("excludes"), std::string::npos) << e;
+  e = error_of("{}", "--plot jpg");
+  EXPECT_NE(e.find("jpg"), std::string::npos) << e;
 }
 
 TEST_F(CommandLine, MotionNoneAndTheStartHeading) {

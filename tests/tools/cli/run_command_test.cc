@@ -18,6 +18,7 @@
 #include "engine/motion_model.h"
 #include "tests/shared_data.h"
 #include "tests/tools/temp_path.h"
+#include "tools/cli/run_output.h"
 #include "tools/io/log_format.h"
 
 namespace fastslam::tools {
@@ -162,26 +163,62 @@ std::uint64_t steps_per_scan(double period) {
   return steps;
 }
 
-// With --out, `fastslam run` draws map.png with the plot script (DESIGN.md's contract); a
-// script that fails is a warning and the run's outputs stand.
+// With --out, `fastslam run` draws map.svg natively (the command line's default), map.png
+// with the plot script on request, or nothing; a picture that fails is a warning and the run's
+// outputs stand.
 TEST(RunCommand, OutDirectoryGetsTheMapPicture) {
-  if (std::system("/usr/bin/python3 -c 'import matplotlib' 2>/dev/null") != 0) {
-    GTEST_SKIP() << "no /usr/bin/python3 with matplotlib (tools/lib/setup.sh installs it)";
-  }
   RunOptions o;
   o.progress = false;
   o.landmarks = 400;
   o.filter.particles = 10;
+  o.out = temp_path("run_svg");
+  o.plot = "svg";
+  ::testing::internal::CaptureStdout();
+  ASSERT_EQ(run_simulation(o), 0);
+  EXPECT_NE(::testing::internal::GetCapturedStdout().find("wrote " + o.out + "/map.svg"),
+            std::string::npos);
+  EXPECT_GT(std::filesystem::file_size(o.out + "/map.svg"), 10'000u);
+  EXPECT_FALSE(std::filesystem::exists(o.out + "/map.png"));
+
+  // A later run without a picture removes the earlier one: a folder never mixes two runs.
+  o.plot = "none";
+  ASSERT_EQ(run_simulation(o), 0);
+  EXPECT_FALSE(std::filesystem::exists(o.out + "/map.svg"));
+
+  if (std::system("/usr/bin/python3 -c 'import matplotlib' 2>/dev/null") != 0) {
+    GTEST_SKIP() << "no /usr/bin/python3 with matplotlib (tools/lib/setup.sh installs it)";
+  }
   o.out = temp_path("run_picture");
+  o.plot = "png";
   o.plot_script = default_plot_script();
   ASSERT_EQ(run_simulation(o), 0);
   EXPECT_GT(std::filesystem::file_size(o.out + "/map.png"), 10'000u);
+  EXPECT_FALSE(std::filesystem::exists(o.out + "/map.svg"));
 
   o.out = temp_path("run_picture_failing_script");
   o.plot_script = o.out + "/no_such_script.py";
   ASSERT_EQ(run_simulation(o), 0);
   EXPECT_TRUE(std::filesystem::exists(o.out + "/metrics.json"));
   EXPECT_FALSE(std::filesystem::exists(o.out + "/map.png"));
+}
+
+// The native picture that fails (a malformed file in the directory) is a warning naming the
+// file and line, and leaves no picture.
+TEST(RunCommand, AFailingSvgPictureIsAWarning) {
+  const std::string dir = temp_path("svg_warning");
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir + "/truth.csv") << "t,x,y,theta\n0,0,0,0\n1,x,0,0\n";
+  ::testing::internal::CaptureStderr();
+  ::testing::internal::CaptureStdout();
+  draw_map_svg(dir, stdout);
+  const std::string out = ::testing::internal::GetCapturedStdout();
+  const std::string err = ::testing::internal::GetCapturedStderr();
+  EXPECT_NE(err.find("warning: map.svg not drawn: " + dir + "/truth.csv:3: column 'x'"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(out, "");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/map.svg"));
+  std::filesystem::remove_all(dir);
 }
 
 // Unset spacing and scan period resolve per world: the grid's are the built-in stress run's

@@ -1,8 +1,11 @@
 #!/usr/bin/python3
 """tools/scripts/plot_run.py on generated run directories: a small map (one panel) and a large one (a
 second panel zoomed on ~150 landmarks on the path) both give a valid PNG; the zoom window holds
-about the requested number of landmarks and is centred on the true path. Exits 77 (skipped)
-without matplotlib."""
+about the requested number of landmarks and is centred on the true path. With the fastslam
+binary as argument, `fastslam run --plot png` draws map.png with it (and no map.svg), as the
+FASTSLAM_PLOT_SCRIPT it names. Exits 77 (skipped) without matplotlib.
+
+Usage: plot_run_test.py [FASTSLAM_BINARY]"""
 import importlib.util
 import json
 import os
@@ -59,6 +62,32 @@ def load_module():
     return module
 
 
+def check_run_plot_png(fastslam, tmp):
+    """`fastslam run --plot png` runs the script (the default one, then $FASTSLAM_PLOT_SCRIPT)
+    and draws no map.svg."""
+    small = [fastslam, "run", "--world", "grid", "--landmarks", "100", "--max-steps", "20",
+             "--no-progress", "--plot", "png"]
+    out = os.path.join(tmp, "run_png")
+    r = subprocess.run(small + ["--out", out], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "wrote " + os.path.join(out, "map.png") in r.stdout, r.stdout
+    with open(os.path.join(out, "map.png"), "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    assert not os.path.exists(os.path.join(out, "map.svg"))
+    with open(os.path.join(out, "metrics.json")) as f:
+        assert json.load(f)["options"]["plot"] == "png"
+    marker = os.path.join(tmp, "script_ran")
+    script = os.path.join(tmp, "my_plot.py")
+    with open(script, "w") as f:
+        f.write("import sys\nopen(%r, 'w').write(sys.argv[1])\n" % marker)
+    r = subprocess.run(small + ["--out", out], capture_output=True, text=True,
+                       env=dict(os.environ, FASTSLAM_PLOT_SCRIPT=script))
+    assert r.returncode == 0, r.stderr
+    with open(marker) as f:
+        assert f.read() == out
+    assert not os.path.exists(os.path.join(out, "map.png"))  # the earlier run's, removed
+
+
 def main():
     plot_run = load_module()
     with tempfile.TemporaryDirectory() as tmp:
@@ -87,6 +116,8 @@ def main():
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         assert any(abs(r["x"] - cx) < 1e-9 and abs(r["y"] - cy) < 1e-9 for r in truth)
         assert abs(cx - 90) < 10 and abs(cy - 90) < 10, (cx, cy)  # near the map's middle
+        if len(sys.argv) > 1:
+            check_run_plot_png(sys.argv[1], tmp)
     print("plot_run: ok")
 
 
