@@ -329,6 +329,9 @@ CASES = [
          **REFUSED, **KEPT),
     Case("missing file", nothing, LOG_RUN, 1,
          "{log}: cannot open for reading: No such file or directory", absent=NOTHING),
+    Case("missing file, --out three levels new", nothing,
+         [a if a != "{out}" else "{dir}/new/deeper/out" for a in LOG_RUN], 1,
+         "{log}: cannot open for reading: No such file or directory", absent=NOTHING),
     Case("directory as --data", directory, LOG_RUN, 1, "{log}: is a directory, not a log file",
          **REFUSED, **KEPT),
     Case("world CSV with a 10^6-byte field", world_csvs,
@@ -581,7 +584,12 @@ def check_case(case, d):
     if case.kind == "api":
         return
     if case.absent == NOTHING:
+        # Nor any missing parent the run created on the way (--out a/b/c).
+        level = out
+        while os.path.dirname(level) != d and level != d and level != "/":
+            level = os.path.dirname(level)
         check(not os.path.exists(out), out + " was created")
+        check(level == d or not os.path.exists(level), level + " was created")
         return
     if os.path.isdir(out):
         check_whole(out)

@@ -684,8 +684,9 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
     check_same_run(options.resume, resumed->identity, identity);
   }
   // Before any work: a run that cannot write its results does not start.
-  CreatedDir created(options.out, !options.out.empty() &&
-                                      check_output_dir(options.out, input_paths, kRunFileNames));
+  CreatedDir created(options.out.empty()
+                         ? std::vector<std::string>()
+                         : check_output_dir(options.out, input_paths, kRunFileNames));
   if (!options.trace.empty()) {
     check_output_file("--trace", options.trace, input_paths, options.out, kRunFileNames);
   }

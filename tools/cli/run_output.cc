@@ -117,8 +117,9 @@ void TraceWriter::close() {
   }
 }
 
-bool check_output_dir(const std::string& dir, std::span<const std::string> inputs,
-                      std::span<const char* const> names) {
+std::vector<std::string> check_output_dir(const std::string& dir,
+                                          std::span<const std::string> inputs,
+                                          std::span<const char* const> names) {
   namespace fs = std::filesystem;
   const std::string what = "--out " + dir + ": ";
   struct stat st {};
@@ -144,8 +145,18 @@ bool check_output_dir(const std::string& dir, std::span<const std::string> input
       }
     }
   }
+  // The levels about to be created, innermost first: those not there yet.
+  std::vector<std::string> created;
+  for (fs::path p = fs::absolute(dir, error); !error && !p.empty() && p != p.parent_path();
+       p = p.parent_path()) {
+    if (p.filename().empty()) continue;  // a trailing '/'
+    if (fs::exists(p, error) || error) break;
+    created.push_back(p.string());
+  }
   fs::create_directories(dir, error);
   if (error) throw std::runtime_error(what + "cannot create it: " + error.message());
+  CreatedDir undo(created);  // removed again if the probe fails
+
   // A probe, so an unwritable directory is refused now rather than after the run.
   const std::string probe = dir + "/.fastslam-probe-" + std::to_string(::getpid());
   const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
@@ -154,7 +165,8 @@ bool check_output_dir(const std::string& dir, std::span<const std::string> input
   }
   ::close(fd);
   ::unlink(probe.c_str());
-  return !exists;
+  undo.keep();
+  return created;
 }
 
 void clear_earlier_run(const std::string& dir, std::span<const char* const> names) {
@@ -186,7 +198,9 @@ void prepare_output_dir(const std::string& dir, std::span<const std::string> inp
 }
 
 CreatedDir::~CreatedDir() {
-  if (!dir_.empty()) ::rmdir(dir_.c_str());  // fails, harmlessly, unless it is empty
+  for (const std::string& dir : dirs_) {
+    if (::rmdir(dir.c_str()) != 0) break;  // not empty: it and its parents stay
+  }
 }
 
 void check_output_file(const std::string& option, const std::string& path,

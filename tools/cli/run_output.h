@@ -74,10 +74,12 @@ inline constexpr const char* kRunFileNames[] = {
 
 // Checks `dir` before a run does any work: refuses (std::runtime_error "--out DIR: ...") a
 // path that is not a directory, cannot be created or written, is one of `inputs` or lies
-// inside one, or holds an input under one of `names`; creates it. Returns whether it created
-// `dir`. Costs: one probe file.
-bool check_output_dir(const std::string& dir, std::span<const std::string> inputs,
-                      std::span<const char* const> names);
+// inside one, or holds an input under one of `names`; creates it and its missing parents.
+// Returns the directories it created, `dir` first and its outermost new parent last (empty
+// when `dir` existed). Costs: one probe file.
+std::vector<std::string> check_output_dir(const std::string& dir,
+                                          std::span<const std::string> inputs,
+                                          std::span<const char* const> names);
 // Removes from `dir` the `names` (and `.NAME.tmp-*` left by a killed run) that an earlier run
 // left, and nothing else; throws std::runtime_error "--out DIR: ..." for one it cannot remove
 // or a directory under one of the names. Costs: one directory listing.
@@ -86,18 +88,19 @@ void clear_earlier_run(const std::string& dir, std::span<const char* const> name
 void prepare_output_dir(const std::string& dir, std::span<const std::string> inputs,
                         std::span<const char* const> names);
 
-// The output directory a run created, removed again at scope exit if it is still empty (the
-// run was refused before it wrote anything) unless keep() was called. Not copyable.
+// The output directories a run created (check_output_dir's list), removed again at scope exit,
+// innermost first, while they are empty (the run was refused before it wrote anything) unless
+// keep() was called. Not copyable.
 class CreatedDir {
  public:
-  CreatedDir(std::string dir, bool created) : dir_(created ? std::move(dir) : std::string()) {}
+  explicit CreatedDir(std::vector<std::string> dirs) : dirs_(std::move(dirs)) {}
   CreatedDir(const CreatedDir&) = delete;
   CreatedDir& operator=(const CreatedDir&) = delete;
   ~CreatedDir();
-  void keep() noexcept { dir_.clear(); }
+  void keep() noexcept { dirs_.clear(); }
 
  private:
-  std::string dir_;
+  std::vector<std::string> dirs_;
 };
 
 // Refuses (std::runtime_error "OPTION PATH: ...") an output file `path` that is one of `inputs`

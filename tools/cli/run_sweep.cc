@@ -118,9 +118,9 @@ int run_sweep(const RunOptions& options) {
   constexpr const char* kSweepFiles[] = {"sweep.json", "sweep.csv"};
   // As for a single run: the directory checked now, an earlier sweep's files removed only once
   // the first seed has opened the input and been accepted, so a refused sweep loses nothing.
-  CreatedDir created(
-      options.out,
-      !options.out.empty() && check_output_dir(options.out, run_inputs(options), kSweepFiles));
+  CreatedDir created(options.out.empty()
+                         ? std::vector<std::string>()
+                         : check_output_dir(options.out, run_inputs(options), kSweepFiles));
   bool accepted = false;
   const auto on_accepted = [&] {
     if (accepted) return;
