@@ -15,7 +15,6 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
-#include <oneapi/tbb/info.h>
 
 #include "engine/angles.h"
 #include "engine/ekf_slam.h"
@@ -733,11 +732,8 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
                                                 resumed->trace, trace_scans)
                 : std::make_unique<TraceWriter>(options.trace, options.trace_every, checkpointing);
   }
-  // With a second thread, the poses are scored and written beside the filter.
-  const unsigned threads =
-      config.threads > 0 ? config.threads : unsigned(tbb::info::default_concurrency());
   RunRecorder recorder(info.header, tracked_point_offset(options, info.header), options.out,
-                       *resolved.rpe_delta, threads > 1);
+                       *resolved.rpe_delta);
   std::unique_ptr<ScanStream> stream;
   if (!options.stream.empty()) stream = std::make_unique<ScanStream>(options.stream);
   Checkpointing checkpoint{options.checkpoint, options.checkpoint_every, identity, {}};

@@ -1,13 +1,9 @@
 #include "tools/cli/run_recorder.h"
 
-#include <atomic>
 #include <cmath>
-#include <condition_variable>
 #include <cstdio>
-#include <mutex>
 #include <stdexcept>
 #include <string_view>
-#include <thread>
 #include <utility>
 
 #include "tools/io/number_text.h"
@@ -57,130 +53,8 @@ class RunRecorder::PoseFile {
   TextLine text_;
 };
 
-// The recorder's own thread and the batches of events handed to it, in call order.
-class RunRecorder::Worker {
- public:
-  enum class Kind : std::uint8_t { kControl, kTruth, kGps, kEstimates };
-  struct Item {
-    Kind kind;
-    Event event;                  // kControl, kTruth, kGps
-    std::size_t first, count;     // kEstimates: Batch::points[first, first + count)
-  };
-  struct Batch {
-    std::vector<Item> items;
-    std::vector<engine::TrajectoryPoint> points;
-  };
-
-  explicit Worker(RunRecorder& owner) : owner_(owner), thread_([this] { loop(); }) {}
-  ~Worker() { stop(); }
-
-  // Filled by the calling thread, handed over whole.
-  Batch front;
-
-  // Queues `front` and gives the caller an empty batch; waits while kQueuedBatches wait.
-  void hand_over() {
-    std::unique_lock lock(mutex_);
-    room_.wait(lock, [&] { return queue_.size() < kQueuedBatches; });
-    queue_.push_back(std::move(front));
-    if (spare_.empty()) {
-      front = Batch{};
-    } else {
-      front = std::move(spare_.back());
-      spare_.pop_back();
-    }
-    lock.unlock();
-    wake_.notify_one();
-  }
-
-  // Lets the thread finish what is queued, and joins it.
-  void stop() {
-    {
-      const std::lock_guard lock(mutex_);
-      stopping_ = true;
-    }
-    wake_.notify_one();
-    if (thread_.joinable()) thread_.join();
-  }
-
-  // Throws the thread's error, if it met one (the same error at every call after it).
-  void rethrow() {
-    if (!failed_.load(std::memory_order_acquire)) return;
-    const std::lock_guard lock(mutex_);
-    thrown_ = true;
-    std::rethrow_exception(error_);
-  }
-
-  // The error's message when no call has thrown it yet (after stop()).
-  std::optional<std::string> unthrown_error() const {
-    if (!error_ || thrown_) return std::nullopt;
-    try {
-      std::rethrow_exception(error_);
-    } catch (const std::exception& e) {
-      return std::string(e.what());
-    } catch (...) {
-      return std::string("unknown error");
-    }
-  }
-
- private:
-  void loop() {
-    for (;;) {
-      Batch batch;
-      {
-        std::unique_lock lock(mutex_);
-        wake_.wait(lock, [&] { return !queue_.empty() || stopping_; });
-        if (queue_.empty()) return;
-        batch = std::move(queue_.front());
-        queue_.pop_front();
-      }
-      room_.notify_one();
-      if (!failed_.load(std::memory_order_relaxed)) run(batch);
-      batch.items.clear();
-      batch.points.clear();
-      const std::lock_guard lock(mutex_);
-      spare_.push_back(std::move(batch));
-    }
-  }
-
-  void run(const Batch& batch) {
-    try {
-      for (const Item& item : batch.items) {
-        switch (item.kind) {
-          case Kind::kControl:
-            owner_.do_control(item.event);
-            break;
-          case Kind::kTruth:
-            owner_.do_truth(item.event);
-            break;
-          case Kind::kGps:
-            owner_.do_gps(item.event);
-            break;
-          case Kind::kEstimates:
-            owner_.do_estimates(std::span(batch.points).subspan(item.first, item.count));
-            break;
-        }
-      }
-    } catch (...) {
-      const std::lock_guard lock(mutex_);
-      error_ = std::current_exception();
-      failed_.store(true, std::memory_order_release);
-    }
-  }
-
-  RunRecorder& owner_;
-  std::mutex mutex_;
-  std::condition_variable wake_, room_;
-  std::deque<Batch> queue_;
-  std::vector<Batch> spare_;
-  bool stopping_ = false;
-  std::atomic<bool> failed_{false};
-  std::exception_ptr error_;
-  bool thrown_ = false;
-  std::thread thread_;  // last: started once the rest exists
-};
-
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
-                         const std::string& out_dir, double rpe_delta, bool background)
+                         const std::string& out_dir, double rpe_delta)
     : reported_(reported),
       out_dir_(out_dir),
       dead_reckoning_(header.motion, header.start_pose, header.start_time),
@@ -202,44 +76,9 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
     dr_truth_.estimate(start);
     dr_gps_.estimate(start);
   }
-  if (background) worker_ = std::make_unique<Worker>(*this);
 }
 
 RunRecorder::~RunRecorder() = default;
-
-void RunRecorder::hand_over() {
-  if (!worker_->front.items.empty()) worker_->hand_over();
-}
-
-void RunRecorder::control(const Event& e) {
-  if (!worker_) return do_control(e);
-  worker_->rethrow();
-  worker_->front.items.push_back({Worker::Kind::kControl, e, 0, 0});
-  if (worker_->front.items.size() >= kBatchEvents) hand_over();
-}
-
-void RunRecorder::truth(const Event& e) {
-  if (!worker_) return do_truth(e);
-  worker_->rethrow();
-  worker_->front.items.push_back({Worker::Kind::kTruth, e, 0, 0});
-  if (worker_->front.items.size() >= kBatchEvents) hand_over();
-}
-
-void RunRecorder::gps(const Event& e) {
-  if (!worker_) return do_gps(e);
-  worker_->rethrow();
-  worker_->front.items.push_back({Worker::Kind::kGps, e, 0, 0});
-  if (worker_->front.items.size() >= kBatchEvents) hand_over();
-}
-
-void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
-  if (!worker_) return do_estimates(points);
-  worker_->rethrow();
-  Worker::Batch& b = worker_->front;
-  b.items.push_back({Worker::Kind::kEstimates, Event{}, b.points.size(), points.size()});
-  b.points.insert(b.points.end(), points.begin(), points.end());
-  if (b.items.size() >= kBatchEvents || b.points.size() >= kBatchEvents) hand_over();
-}
 
 void RunRecorder::Scored::estimate(const StampedPose& p) {
   if (error) return;
@@ -269,7 +108,7 @@ RunRecorder::PoseFile& RunRecorder::file(std::unique_ptr<PoseFile>& slot, const 
   return *slot;
 }
 
-void RunRecorder::do_control(const Event& e) {
+void RunRecorder::control(const Event& e) {
   control_times_.push_back(e.time);
   dead_reckoning_.predict(e.control, e.dt, e.time);
   if (!dead_reckoning_.available()) return;
@@ -278,7 +117,7 @@ void RunRecorder::do_control(const Event& e) {
   if (!out_dir_.empty()) file(dr_csv_, "dead_reckoning.csv", false).add(dead_reckoning_.pose());
 }
 
-void RunRecorder::do_truth(const Event& e) {
+void RunRecorder::truth(const Event& e) {
   const StampedPose p{e.time, e.x, e.y, e.theta};
   filter_truth_.reference(p);
   if (dead_reckoning_.available()) dr_truth_.reference(p);
@@ -287,7 +126,7 @@ void RunRecorder::do_truth(const Event& e) {
   if (!out_dir_.empty()) file(truth_csv_, "truth.csv", false).add(p);
 }
 
-void RunRecorder::do_gps(const Event& e) {
+void RunRecorder::gps(const Event& e) {
   const StampedPose p{e.time, e.x, e.y, 0.0};
   filter_gps_.reference(p);
   if (dead_reckoning_.available()) dr_gps_.reference(p);
@@ -295,7 +134,7 @@ void RunRecorder::do_gps(const Event& e) {
   if (!out_dir_.empty()) file(gps_csv_, "gps.csv", true).add(p);
 }
 
-void RunRecorder::do_estimates(std::span<const engine::TrajectoryPoint> points) {
+void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
   for (const engine::TrajectoryPoint& point : points) {
     if (point.control != first_pending_control_ || control_times_.empty()) {
       throw std::logic_error("RunRecorder: trajectory point of control " +
@@ -317,12 +156,6 @@ void RunRecorder::do_estimates(std::span<const engine::TrajectoryPoint> points) 
 
 RecordedRun RunRecorder::finish() {
   RecordedRun r;
-  if (worker_) {
-    hand_over();
-    worker_->stop();
-    if (std::optional<std::string> error = worker_->unthrown_error()) r.errors.push_back(*error);
-    worker_.reset();
-  }
   // Each file on its own: one that failed leaves the others whole.
   auto close = [&](std::unique_ptr<PoseFile>& f, const char* name) {
     if (!f) return;

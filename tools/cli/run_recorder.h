@@ -6,21 +6,13 @@
 // streaming trajectory evaluation (tools/eval/trajectory_metrics.h) against the truth and
 // against GPS.
 //
-// In the background (the constructor's `background`), the calls only queue their events and
-// return; one thread of the recorder's own scores and writes them, in call order, so the files
-// and scores are the same bytes, while the filter goes on with the next scan. A run with more
-// than one thread uses it: at small M, formatting and scoring the poses costs about as much as
-// the filter.
-//
-// Ownership: owns its files, evaluators and (in the background) its thread. Thread safety:
-// thread-compatible (its own thread touches only what the calls hand it). Costs: O(1) per
-// control, truth pose or fix plus a buffered file write; memory O(controls between two estimate
-// batches), and in the background at most kQueuedBatches batches of kBatchEvents events queued.
+// Ownership: owns its files and evaluators. Thread safety: thread-compatible.
+// Costs: O(1) per control, truth pose or fix plus a buffered file write; memory O(controls
+// between two estimate batches).
 #pragma once
 
 #include <cstdint>
 #include <deque>
-#include <exception>
 #include <memory>
 #include <optional>
 #include <span>
@@ -58,16 +50,12 @@ class RunRecorder {
  public:
   // `header`: the source's start pose and motion model (dead reckoning's); `reported`: where
   // the source's pose sits from the point the filter tracks; `out_dir`: empty for no files;
-  // `rpe_delta`: metres of reference path per relative-error pair; `background`: score and
-  // write on a thread of its own. Throws std::runtime_error naming a file it cannot create.
+  // `rpe_delta`: metres of reference path per relative-error pair. Throws std::runtime_error
+  // naming a file it cannot create.
   RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
-              const std::string& out_dir, double rpe_delta, bool background = false);
+              const std::string& out_dir, double rpe_delta);
   ~RunRecorder();
-  RunRecorder(const RunRecorder&) = delete;
-  RunRecorder& operator=(const RunRecorder&) = delete;
 
-  // Each throws std::runtime_error when a file cannot be written (in the background: at the
-  // first call after the recorder's thread met the error; it then records nothing more).
   void control(const Event& event);
   void truth(const Event& event);
   void gps(const Event& event);
@@ -75,24 +63,11 @@ class RunRecorder {
   void estimates(std::span<const engine::TrajectoryPoint> points);
 
   // Puts the files in place (one that fails is left out, its message in `errors`) and scores.
-  // Call it also after a failed or interrupted run: the files then hold the poses so far. In
-  // the background it first waits for the queued events; a write error not yet thrown by a
-  // call is in `errors`.
+  // Call it also after a failed or interrupted run: the files then hold the poses so far.
   RecordedRun finish();
-
-  static constexpr std::size_t kBatchEvents = 1024;
-  static constexpr std::size_t kQueuedBatches = 4;
 
  private:
   class PoseFile;
-  class Worker;
-
-  void do_control(const Event& event);
-  void do_truth(const Event& event);
-  void do_gps(const Event& event);
-  void do_estimates(std::span<const engine::TrajectoryPoint> points);
-  // In the background: hands the events queued so far to the recorder's thread.
-  void hand_over();
 
   PoseFile& file(std::unique_ptr<PoseFile>& slot, const char* name, bool position_only);
 
@@ -116,7 +91,6 @@ class RunRecorder {
   std::unique_ptr<PoseFile> trajectory_csv_, trajectory_tum_, truth_csv_, gps_csv_, dr_csv_;
   std::optional<StampedPose> last_truth_;
   std::uint64_t truth_poses_ = 0, gps_fixes_ = 0;
-  std::unique_ptr<Worker> worker_;  // null unless in the background
 };
 
 }  // namespace fastslam::tools
