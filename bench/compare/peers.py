@@ -21,9 +21,7 @@ Peers:
     /usr/bin/python3 bench/compare/peers.py --build build/release --shared ../shared \\
         --fasterslam /path/to/FasterSLAM/src --particles 100,1000 --threads 1,2 --rounds 5
 
-With more than one thread, `fastslam run` scores and writes its poses on a second thread
-(tools/cli/run_recorder.h) and splits the filter's passes when they are heavy enough. Prints a
-Markdown table; --json keeps every time and the summary rows.
+Prints a Markdown table; --json keeps every time and the summary rows.
 """
 
 import argparse

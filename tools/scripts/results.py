@@ -324,8 +324,8 @@ def render(data):
                   "its optimised routine, built Release with its own CMake; it keeps its "
                   "resampling threshold at 75 particles whatever M). Median (minimum) of "
                   f"{whole['rounds']} rounds in rotating order; \"filter loop\" is metrics.json's "
-                  "`wall_seconds`. With two threads the run scores and writes its poses on a "
-                  "second thread.", "",
+                  "`wall_seconds` (the loop over the source's events: the filter, scoring and "
+                  "writing the poses).", "",
                   f"`{whole['command']}`", "",
                   "| M | program | wall, ms | CPU, ms | filter loop, ms | wall / FasterSLAM's |",
                   "|---|---|---|---|---|---|"]
