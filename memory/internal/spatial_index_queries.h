@@ -122,14 +122,15 @@ void BasicSpatialIndex<P>::within(double x, double y, double radius, Visit&& vis
   if (root_ == nullptr) {
     return;
   }
-  const double r2 = radius * radius;
-  const double prune2 = r2 + r2 * 0x1p-40;  // rounding margin: never prunes an entry within
-  if (box_distance2(root_cell_, x, y) > prune2) {
-    return;
-  }
-  // sqrt(prune2) rounds to within an ulp of the pruning radius; the relative 2^-30 covers it.
-  const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
-  within_node(root_, root_cell_, x, y, r2, prune2, reach, AnyReach{}, visit);
+  // From the deepest node whose square holds the disc's (as within(from, ...), which checks
+  // the containment exactly): the same entries in the same order as from the root, and the
+  // levels above cost a cheap descent instead of within_node's per-level work.
+  const double prune2 = radius * radius * (1.0 + 0x1p-40);
+  const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30) * (1.0 + 0x1p-30);
+  const double margin = 0x1p-29 * (std::fabs(x) + std::fabs(y) + reach);
+  const Subtree from =
+      covering(x - reach - margin, y - reach - margin, x + reach + margin, y + reach + margin);
+  within_reach(from, x, y, radius, AnyReach{}, visit);
 }
 
 template <class P>
