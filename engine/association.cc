@@ -1,6 +1,7 @@
 #include "engine/association.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace fastslam::engine {
@@ -23,16 +24,25 @@ double associate_maximum_likelihood(std::span<AssociationCandidate> candidates,
             });
   double log_weight = 0.0;
   std::size_t assigned = 0;
+  // The taken slots, in the order taken (the first kListed; beyond, `assignment` holds them all):
+  // scans are small, so a linear look is cheapest.
+  constexpr std::size_t kListed = 32;
+  std::array<memory::Slot, kListed> taken_slots;
+  const auto taken = [&](memory::Slot slot) {
+    if (assigned <= kListed) {
+      return std::find(taken_slots.begin(), taken_slots.begin() + assigned, slot) !=
+             taken_slots.begin() + assigned;
+    }
+    return std::find(assignment.begin(), assignment.end(), static_cast<std::int64_t>(slot)) !=
+           assignment.end();
+  };
   for (std::size_t c = 0; c < candidates.size() && assigned < assignment.size(); ++c) {
     const AssociationCandidate& cand = candidates[c];
     if (cand.log_likelihood < log_new_landmark) break;  // sorted: every later one is below too
-    if (assignment[cand.observation] != kNewLandmark) continue;
-    // Taken slots are the assigned ones; scans are small, so a linear look is cheapest.
-    bool taken = false;
-    for (std::int64_t a : assignment) taken = taken || a == static_cast<std::int64_t>(cand.slot);
-    if (taken) continue;
+    if (assignment[cand.observation] != kNewLandmark || taken(cand.slot)) continue;
     assignment[cand.observation] = cand.slot;
     log_weight += cand.log_likelihood;
+    if (assigned < kListed) taken_slots[assigned] = cand.slot;
     ++assigned;
   }
   log_weight += static_cast<double>(assignment.size() - assigned) * log_new_landmark;
@@ -62,7 +72,8 @@ double associate_sampling(std::span<AssociationCandidate> candidates, double log
     }
     double total = std::exp(log_new_landmark - top);
     for (std::size_t k = first; k < c; ++k) {
-      if (!contains(taken, candidates[k].slot)) total += std::exp(candidates[k].log_likelihood - top);
+      if (!contains(taken, candidates[k].slot))
+        total += std::exp(candidates[k].log_likelihood - top);
     }
     log_weight += top + std::log(total);
     // Walk the cumulative sum to the uniform's point; "new" is the last bucket, so rounding at

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstddef>
+#include <span>
 #include <utility>
 
 #include "memory/landmark_tree.h"
@@ -64,6 +65,14 @@ class ParticleMap {
   template <class Change, class ExtentOf>
   void update(Slot slot, Change&& change, const ExtentOf& extent_of);
 
+  // update(slots[k], change_k, extent_of) for k = 0, 1, ... in turn, where change_k(landmark)
+  // is change(k, landmark): the index moves share their descents (SpatialIndex::MoveFinger),
+  // which is the gain when the landmarks lie near each other (a scan's). `change` must not use
+  // the map (nor copy it: the run's path is this map's alone until it returns). Throws as update;
+  // then the landmarks before the failing one are updated, it and those after unchanged.
+  template <class Change, class ExtentOf>
+  void update_each(std::span<const Slot> slots, Change&& change, const ExtentOf& extent_of);
+
   // The landmark in `slot`, writable in place (LandmarkTree::edit), for maps without an index,
   // where nothing else depends on it. Throws std::logic_error when the map is indexed.
   Landmark& edit_unindexed(Slot slot);
@@ -105,6 +114,21 @@ void ParticleMap::update(Slot slot, Change&& change, const ExtentOf& extent_of) 
     index_.move(slot, stored.x, stored.y, next.x, next.y, extent_of(next));
   }
   stored = next;
+}
+
+template <class Change, class ExtentOf>
+void ParticleMap::update_each(std::span<const Slot> slots, Change&& change,
+                              const ExtentOf& extent_of) {
+  SpatialIndex::MoveFinger finger(index_);
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    Landmark& stored = tree_.edit(slots[k]);
+    Landmark next = stored;
+    change(k, next);
+    if (indexed_ && (next.x != stored.x || next.y != stored.y)) {
+      finger.move(slots[k], stored.x, stored.y, next.x, next.y, extent_of(next));
+    }
+    stored = next;
+  }
 }
 
 }  // namespace fastslam::memory

@@ -16,6 +16,7 @@
 // leaf). Changes allocate path copies and split nodes only.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -97,6 +98,10 @@ class BasicSpatialIndex {
   // Moves the entry (slot, from) to `to`, where it holds `extent`. Throws as erase (no such
   // entry) and insert (bad `to`, bad_alloc); then the index holds the same entries as before.
   void move(Slot slot, double from_x, double from_y, double to_x, double to_y, float extent = 0.0f);
+
+  // Moves of entries that lie near each other, in a row (a scan's updated landmarks); declared
+  // at the end of the class.
+  class MoveFinger;
 
   // Removes every entry (releases this handle's reference to the root).
   void clear() noexcept;
@@ -243,8 +248,12 @@ class BasicSpatialIndex {
 
   Node* make_leaf(std::uint32_t capacity);
   Inner* make_inner();
-  // A node equal to `node` that this index holds alone (see the landmark tree's `own`).
-  Node* own(Node* node);
+  // A node equal to `node` that this index holds alone (see the landmark tree's `own`): the node
+  // itself when unique (inlined: every level of every change asks), else copy_shared's copy.
+  [[gnu::always_inline]] Node* own(Node* node) {
+    return node->refs.unique() ? node : copy_shared(node);
+  }
+  Node* copy_shared(Node* node);
   static void release(Node* node, NodeHeap& heap) noexcept;
   static void free_node(Node* node, NodeHeap& heap) noexcept;
   // A subtree for `cell` holding entries [first, last) (which it reorders); splits as needed.
@@ -272,12 +281,21 @@ class BasicSpatialIndex {
   template <class Reach2, class Visit>
   static void within_node(const Node* node, const Cell& cell, double x, double y, double r2,
                           double prune2, double reach, const Reach2& reach2, Visit& visit);
-  // The batch query's discs below `node` whose bit is set in `active` (at most 64 at a time).
+  // The batch query's discs below `node` whose bit is set in `active` (at most 64 at a time):
+  // each disc's centre, squared radius and pruning bound, and the square [lo_x, hi_x] x
+  // [lo_y, hi_y] that holds every entry the disc can hit (half-side `reach` plus the rounding
+  // margin). An inner node passes each child the discs whose square overlaps the child's: two
+  // comparisons per disc and axis against the exact boundaries between the children, no
+  // distance per child; the exact box test runs at the leaves.
   struct DiscBounds {
     double x;
     double y;
     double r2;
     double prune2;
+    double lo_x;
+    double hi_x;
+    double lo_y;
+    double hi_y;
   };
   template <class Reach2, class Visit>
   static void within_many_node(const Node* node, const Cell& cell, const DiscBounds* discs,
@@ -303,6 +321,34 @@ class BasicSpatialIndex {
   NodeHeap* heap_;
   Cell root_cell_{0.0, 0.0, 1.0, 0};
   std::size_t size_ = 0;
+
+ public:
+  // A run of moves in one index: each move(...) is the index's move(...) (same entries, same
+  // exceptions and guarantee), but descends from the deepest node of the previous move's path
+  // whose square holds the entry, when every node above it is still this index's alone,
+  // instead of from the root: for a scan's landmarks, which lie near each other, a move then
+  // owns and tests a few levels, not the whole path. A move that changes the index's shape (the
+  // entry leaves its leaf) forgets the path.
+  // It borrows the index: while it is used, the index changes only through it (it may be
+  // copied meanwhile: a shared path is owned again). Not thread-safe; no allocation of its own
+  // (the path is kept inline, 2 KB).
+  class MoveFinger {
+   public:
+    explicit MoveFinger(BasicSpatialIndex& index) noexcept : index_(&index) {}
+    MoveFinger(const MoveFinger&) = delete;
+    MoveFinger& operator=(const MoveFinger&) = delete;
+
+    void move(Slot slot, double from_x, double from_y, double to_x, double to_y,
+              float extent = 0.0f);
+
+   private:
+    // Levels kept: deeper ones are not recorded (a later move starts from the deepest kept).
+    static constexpr unsigned kDepth = 48;
+    BasicSpatialIndex* index_;
+    unsigned depth_ = 0;  // path_[0 .. depth_) from the root, each node owned when recorded
+    std::array<Node*, kDepth> path_;
+    std::array<Cell, kDepth> cells_;
+  };
 };
 
 using SpatialIndex = BasicSpatialIndex<DefaultSpatialPolicy>;

@@ -12,22 +12,176 @@
 // Args: algorithm (1, 2), association (0 known, 1 ML), N, threads. Under FASTSLAM_BENCH_SMOKE=1:
 // N = 10^3, 60 scans. Google Benchmark's JSON: --benchmark_out=F --benchmark_out_format=json
 // (docs/scaling.md).
+//
+// BM_AssociationKernel/K: the association kernel alone, one particle, FastSLAM 1.0, maximum
+// likelihood: the candidate search of a scan of 8 observations (engine/internal/
+// candidate_search.h: the disc query of the particle's spatial index, the extent and
+// Mahalanobis bounds, the exact gate and likelihood of every candidate) and the joint choice
+// (associate_maximum_likelihood), with about K = 10, 100, 1000 landmarks inside each
+// observation's search disc (a dense patch around each observed landmark, in a 10^4-landmark
+// map). The time is per particle-observation (a call's time / 8); `in_disc`, `candidates`:
+// landmarks inside the disc and gated candidates per observation;
+// tools/scripts/callgrind_kernels.sh counts its instructions (association_kernel, not inlined)
+// against the floor (landmark_ekf_benchmark.cc).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <cstdint>
+#include <numbers>
+#include <random>
+#include <span>
+#include <vector>
 
 #include <benchmark/benchmark.h>
 
 #include "bench/bench_util.h"
+#include "engine/association.h"
 #include "engine/filter_config.h"
+#include "engine/internal/candidate_search.h"
+#include "engine/internal/map_update.h"
+#include "engine/landmark_ekf.h"
+#include "engine/measurement_model.h"
+#include "memory/landmark_tree.h"
+#include "memory/node_heap.h"
+#include "memory/spatial_index.h"
 #include "tools/studies/scaling_study.h"
 
 namespace fastslam::engine {
+namespace bench {
+
+// One particle's association of one scan: candidates, then the maximum-likelihood choice.
+// Returns the log weight factor. Not inlined, so that callgrind counts it by name
+// (fastslam::engine::bench::association_kernel).
+[[gnu::noinline]] double association_kernel(
+    const internal::SearchInput& in, const PoseGaussian<3>& prior, const memory::LandmarkTree& map,
+    const memory::SpatialIndex& index, const std::vector<internal::PlannedObservation>& scan,
+    internal::CandidateScratch& scratch, std::span<std::int64_t> assignment) {
+  internal::find_candidates<3, false, true>(in, prior, map, index, scan, scratch);
+  return associate_maximum_likelihood(scratch.candidates, in.log_p0, assignment);
+}
+
+}  // namespace bench
+
 namespace {
+
+// The kernel's world: a particle at the origin heading along x, 8 observations of landmarks at
+// 6 .. 27 m within +-60 degrees, each landmark with `in_disc` - 1 others spread uniformly over
+// its observation's search disc (each with the covariance a first sighting from there gives,
+// so that its own reach covers the disc too), and a background grid of 10^4 landmarks 10 m
+// apart (none within two disc radii of an observed landmark). The filter's default noises,
+// gate, search scale and p0.
+struct KernelWorld {
+  static constexpr std::size_t kObservations = 8;
+  memory::PoolHeap heap;
+  memory::LandmarkTree map{heap};
+  memory::SpatialIndex index{heap};
+  RangeBearingModel sensor;
+  internal::SearchInput in;
+  PoseGaussian<3> prior;
+  std::vector<internal::PlannedObservation> scan;
+  double in_disc = 0.0;  // landmarks inside the discs, per observation (brute force)
+
+  explicit KernelWorld(std::size_t per_disc) {
+    const FilterConfig config;
+    in.sensor = &sensor;
+    in.r << config.sensor.sigma_range * config.sensor.sigma_range, 0.0, 0.0,
+        config.sensor.sigma_bearing * config.sensor.sigma_bearing;
+    in.gate = config.gating.gate;
+    in.search_scale = config.gating.search_scale;
+    in.log_p0 = config.log_new_landmark;
+    prior.mean.setZero();
+    const Pose pose = prior.mean;
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::vector<LandmarkGaussian> observed;
+    for (std::size_t j = 0; j < kObservations; ++j) {
+      const double range = 6.0 + 3.0 * static_cast<double>(j);
+      const double bearing = (unit(rng) - 0.5) * 2.0 * std::numbers::pi / 3.0;
+      internal::PlannedObservation o;
+      o.z = {range, bearing};
+      scan.push_back(o);
+      observed.push_back(initialize_landmark(sensor, pose, o.z, in.r));
+      in.variance_bound = std::max(in.variance_bound, internal::measurement_variance(in.r, range));
+    }
+    const double scale2 = in.search_scale * in.search_scale;
+    auto radius_of = [&](std::size_t j) {
+      return std::sqrt(scale2 * in.gate *
+                       (in.variance_bound + internal::measurement_variance(in.r, scan[j].z[0])));
+    };
+    auto add = [&](const LandmarkGaussian& g) {
+      memory::Landmark l;
+      store_gaussian(g, l);
+      l.log_odds = 1.0;
+      l.id = map.size();
+      const memory::Slot slot = map.insert(l);
+      index.insert(slot, l.x, l.y, internal::largest_variance(l));
+    };
+    for (std::size_t j = 0; j < kObservations; ++j) {
+      add(observed[j]);
+      const double r = radius_of(j);
+      for (std::size_t k = 1; k < per_disc; ++k) {
+        const double a = 2.0 * std::numbers::pi * unit(rng);
+        const double d = r * std::sqrt(unit(rng));
+        LandmarkGaussian g = observed[j];
+        g.mean += Eigen::Vector2d(d * std::cos(a), d * std::sin(a));
+        add(g);
+      }
+    }
+    for (int gx = -50; gx < 50; ++gx) {
+      for (int gy = -50; gy < 50; ++gy) {
+        LandmarkGaussian g = observed[0];
+        g.mean = {10.0 * gx + 5.0 * unit(rng), 10.0 * gy + 5.0 * unit(rng)};
+        bool clear = true;
+        for (std::size_t j = 0; j < kObservations; ++j) {
+          clear = clear && (g.mean - observed[j].mean).norm() > 2.0 * radius_of(j);
+        }
+        if (clear) add(g);
+      }
+    }
+    std::size_t inside = 0;
+    for (std::size_t j = 0; j < kObservations; ++j) {
+      const double r = radius_of(j);
+      for (const auto [slot, l] : map) {
+        inside += (Eigen::Vector2d(l.x, l.y) - observed[j].mean).norm() <= r ? 1 : 0;
+      }
+    }
+    in_disc = static_cast<double>(inside) / static_cast<double>(kObservations);
+  }
+};
+
+void BM_AssociationKernel(benchmark::State& state) {
+  const KernelWorld w(static_cast<std::size_t>(state.range(0)));
+  internal::CandidateScratch scratch;
+  std::vector<std::int64_t> assignment(w.scan.size());
+  const auto observations = static_cast<double>(w.scan.size());
+  // Timed per call, reported per particle-observation (the clock reads add ~1%).
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    benchmark::DoNotOptimize(
+        bench::association_kernel(w.in, w.prior, w.map, w.index, w.scan, scratch, assignment));
+    const auto t1 = std::chrono::steady_clock::now();
+    state.SetIterationTime(std::chrono::duration<double>(t1 - t0).count() / observations);
+  }
+  state.counters["observations"] = observations;
+  state.counters["in_disc"] = w.in_disc;
+  state.counters["candidates"] = static_cast<double>(scratch.candidates.size()) / observations;
+  state.counters["associated"] = static_cast<double>(std::count_if(
+      assignment.begin(), assignment.end(), [](std::int64_t a) { return a != kNewLandmark; }));
+}
+
+BENCHMARK(BM_AssociationKernel)
+    ->ArgName("in_disc")
+    ->Arg(10)
+    ->Arg(100)
+    ->Arg(1000)
+    ->UseManualTime()
+    ->Unit(benchmark::kNanosecond);
 
 // One point of the scaling study (tools/studies/scaling_study.h), which owns the setup and the
 // timing.
 void BM_AssociationScaling(benchmark::State& state) {
   tools::ScalingOptions options;
-  options.updates = static_cast<std::uint64_t>(bench::upto(500, 60));
+  options.updates = static_cast<std::uint64_t>(fastslam::bench::upto(500, 60));
   options.filter.algorithm = state.range(0) == 1 ? Algorithm::kFastSlam1 : Algorithm::kFastSlam2;
   options.filter.association =
       state.range(1) == 0 ? Association::kKnown : Association::kMaximumLikelihood;
@@ -51,7 +205,7 @@ void BM_AssociationScaling(benchmark::State& state) {
 }
 
 void scaling_args(benchmark::internal::Benchmark* b) {
-  const std::int64_t max_n = bench::upto(1'000'000, 1'000);
+  const std::int64_t max_n = fastslam::bench::upto(1'000'000, 1'000);
   for (const std::int64_t algorithm : {1, 2}) {
     for (const std::int64_t association : {0, 1}) {
       for (std::int64_t n = 1'000; n <= max_n; n *= 10) b->Args({algorithm, association, n, 1});

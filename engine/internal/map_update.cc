@@ -9,35 +9,38 @@
 namespace fastslam::engine::internal {
 namespace {
 
-// The chosen landmarks updated and their index entries moved; their slots go to `touched`.
+// The chosen landmarks updated and their index entries moved (one run of moves: they lie near
+// each other); their slots go to `touched`, their observations to `observed`.
 template <bool kFs2>
 void update_chosen(const MapUpdateInput& in, const Pose& pose,
                    const std::vector<PlannedObservation>& scan,
                    std::span<const std::int64_t> assignment,
                    std::span<const LandmarkObservation> terms,
                    std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
-                   std::vector<memory::Slot>& touched) {
+                   std::vector<memory::Slot>& touched, std::vector<std::uint32_t>& observed) {
   const auto step_now = static_cast<std::int64_t>(in.scan_step);
   touched.clear();
+  observed.clear();
   for (std::size_t j = 0; j < scan.size(); ++j) {
     if (assignment[j] == kNewLandmark) continue;
-    const auto slot = static_cast<memory::Slot>(assignment[j]);
-    map.update(
-        slot,
-        [&](memory::Landmark& stored) {
-          LandmarkGaussian lm = to_gaussian(stored);
-          if constexpr (kFs2) {
-            apply_update(lm, evaluate_observation(*in.sensor, lm, pose, scan[j].z, in.r), in.r);
-          } else {
-            apply_update(lm, terms[chosen_terms[j]], in.r);
-          }
-          store_gaussian(lm, stored);
-          stored.log_odds += in.existence.seen;
-          stored.last_seen = step_now;
-        },
-        largest_variance);
-    touched.push_back(slot);
+    touched.push_back(static_cast<memory::Slot>(assignment[j]));
+    observed.push_back(static_cast<std::uint32_t>(j));
   }
+  map.update_each(
+      touched,
+      [&](std::size_t k, memory::Landmark& stored) {
+        const std::size_t j = observed[k];
+        LandmarkGaussian lm = to_gaussian(stored);
+        if constexpr (kFs2) {
+          apply_update(lm, evaluate_observation(*in.sensor, lm, pose, scan[j].z, in.r), in.r);
+        } else {
+          apply_update(lm, terms[chosen_terms[j]], in.r);
+        }
+        store_gaussian(lm, stored);
+        stored.log_odds += in.existence.seen;
+        stored.last_seen = step_now;
+      },
+      largest_variance);
 }
 
 // Negative information: the landmarks in the footprint and not touched lose `missed` log-odds
@@ -88,7 +91,8 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          std::span<const LandmarkObservation> terms,
                          std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
                          MapUpdateScratch& scratch, MapUpdateCounts& counts) {
-  update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, scratch.touched);
+  update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, scratch.touched,
+                      scratch.observed);
   const ExistenceConfig& ex = in.existence;
   if (ex.negative_information && in.max_range > ex.range_margin) {
     apply_negative_information(in, pose, map, scratch, counts);

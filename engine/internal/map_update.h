@@ -34,7 +34,8 @@ float largest_variance(const memory::Landmark& l);
 
 // The map update's per-thread buffers.
 struct MapUpdateScratch {
-  std::vector<memory::Slot> touched;
+  std::vector<memory::Slot> touched;    // the chosen landmarks
+  std::vector<std::uint32_t> observed;  // their observations
   std::vector<memory::SpatialEntry> in_view;
 };
 

@@ -181,13 +181,18 @@ void BasicLandmarkTree<P>::release(Node* node, unsigned height, NodeHeap& heap) 
 
 template <class P>
 auto BasicLandmarkTree<P>::own_path(Slot slot, std::array<Inner*, kMaxHeight>& path) -> Leaf* {
-  root_ = own(root_, height_);
+  // A unique node is taken as is without a call: every level of every update asks.
+  if (root_ == nullptr || !root_->refs.unique()) {
+    root_ = own(root_, height_);
+  }
   Node* node = root_;
   for (unsigned h = height_; h > 0; --h) {
     auto* inner = static_cast<Inner*>(node);
     path[height_ - h] = inner;
     Node*& link = inner->child[child_index(slot, h)];
-    link = own(link, h - 1);
+    if (link == nullptr || !link->refs.unique()) {
+      link = own(link, h - 1);
+    }
     node = link;
   }
   return static_cast<Leaf*>(node);

@@ -337,30 +337,68 @@ void BasicSpatialIndex<P>::erase(Slot slot, double x, double y) {
 template <class P>
 void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double to_x, double to_y,
                                 float extent) {
+  MoveFinger finger(*this);
+  finger.move(slot, from_x, from_y, to_x, to_y, extent);
+}
+
+template <class P>
+void BasicSpatialIndex<P>::MoveFinger::move(Slot slot, double from_x, double from_y, double to_x,
+                                            double to_y, float extent) {
+  BasicSpatialIndex& index = *index_;
   check_point(to_x, to_y, "move");
-  if (root_ == nullptr || !contains(root_cell_, from_x, from_y)) {
+  if (index.root_ == nullptr || !contains(index.root_cell_, from_x, from_y)) {
     internal::throw_no_entry("move", slot, from_x, from_y);
   }
-  // One descent, owning the path to the leaf that holds `from` (the path any change of this
-  // entry owns: an in-place move, or the erase after an insert). Owning replaces a node by an
-  // equal copy, so on bad_alloc or when there is no such entry the entries are unchanged.
-  Node** link = &root_;
-  Cell cell = root_cell_;
-  for (;;) {
-    *link = own(*link);
-    if ((*link)->leaf()) {
-      break;
+  // Where to start: the deepest recorded node whose square holds `from`, when the recorded
+  // path down to it is still owned (a copy of the index made meanwhile shares it); else the
+  // root. One descent from there owns the path to the leaf that holds `from` (the path any
+  // change of this entry owns: an in-place move, or the erase after an insert). Owning
+  // replaces a node by an equal copy, so on bad_alloc or when there is no such entry the
+  // entries are unchanged (and the path recorded so far is owned).
+  unsigned level = 0;
+  if (depth_ != 0 && path_[0] == index.root_) {
+    level = depth_ - 1;
+    while (level > 0 && !contains(cells_[level], from_x, from_y)) {
+      --level;
     }
+    for (unsigned k = 0; k <= level; ++k) {
+      if (!path_[k]->refs.unique()) {
+        level = 0;
+        depth_ = 0;
+        break;
+      }
+    }
+  } else {
+    depth_ = 0;
+  }
+  Node* node;
+  Cell cell;
+  if (depth_ == 0) {
+    node = index.root_ = index.own(index.root_);
+    cell = index.root_cell_;
+    path_[0] = node;
+    cells_[0] = cell;
+  } else {
+    node = path_[level];
+    cell = cells_[level];
+  }
+  depth_ = level + 1;
+  while (!node->leaf()) {
     Cell child;
-    Node** next = &static_cast<Inner*>(*link)->child[child_of(cell, from_x, from_y, child)];
-    if (*next == nullptr) {
+    Node** link = &static_cast<Inner*>(node)->child[child_of(cell, from_x, from_y, child)];
+    if (*link == nullptr) {
       internal::throw_no_entry("move", slot, from_x, from_y);
     }
-    link = next;
+    node = *link = index.own(*link);
     cell = child;
+    if (depth_ < kDepth) {
+      path_[depth_] = node;
+      cells_[depth_] = cell;
+      ++depth_;
+    }
   }
-  SpatialEntry* e = entries(*link);
-  const std::uint32_t count = (*link)->count;
+  SpatialEntry* e = entries(node);
+  const std::uint32_t count = node->count;
   std::uint32_t i = 0;
   while (i < count && !(e[i].slot == slot && e[i].x == from_x && e[i].y == from_y)) {
     ++i;
@@ -373,18 +411,19 @@ void BasicSpatialIndex<P>::move(Slot slot, double from_x, double from_y, double 
     e[i].y = to_y;
     e[i].extent = extent;
     if (i == 0) {
-      widest_first(*link);
+      widest_first(node);
     } else if (wider(extent, e[0].extent)) {
       std::swap(e[0], e[i]);
     }
     return;
   }
-  insert(slot, to_x, to_y, extent);
+  depth_ = 0;  // the shape changes
+  index.insert(slot, to_x, to_y, extent);
   try {
-    erase_existing(slot, from_x, from_y);
+    index.erase_existing(slot, from_x, from_y);
   } catch (...) {
     // The path to the new entry is owned (insert made it so): removing it allocates nothing.
-    erase_existing(slot, to_x, to_y);
+    index.erase_existing(slot, to_x, to_y);
     throw;
   }
 }

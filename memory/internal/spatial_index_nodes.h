@@ -160,10 +160,7 @@ auto BasicSpatialIndex<P>::make_inner() -> Inner* {
 }
 
 template <class P>
-auto BasicSpatialIndex<P>::own(Node* node) -> Node* {
-  if (node->refs.unique()) {
-    return node;
-  }
+auto BasicSpatialIndex<P>::copy_shared(Node* node) -> Node* {
   Node* copy;
   if (node->leaf()) {
     copy = make_leaf(node->capacity);

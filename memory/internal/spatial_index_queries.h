@@ -122,14 +122,15 @@ void BasicSpatialIndex<P>::within(double x, double y, double radius, Visit&& vis
   if (root_ == nullptr) {
     return;
   }
-  const double r2 = radius * radius;
-  const double prune2 = r2 + r2 * 0x1p-40;  // rounding margin: never prunes an entry within
-  if (box_distance2(root_cell_, x, y) > prune2) {
-    return;
-  }
-  // sqrt(prune2) rounds to within an ulp of the pruning radius; the relative 2^-30 covers it.
-  const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
-  within_node(root_, root_cell_, x, y, r2, prune2, reach, AnyReach{}, visit);
+  // From the deepest node whose square holds the disc's (as within(from, ...), which checks
+  // the containment exactly): the same entries in the same order as from the root, and the
+  // levels above cost a cheap descent instead of within_node's per-level work.
+  const double prune2 = radius * radius * (1.0 + 0x1p-40);
+  const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30) * (1.0 + 0x1p-30);
+  const double margin = 0x1p-29 * (std::fabs(x) + std::fabs(y) + reach);
+  const Subtree from =
+      covering(x - reach - margin, y - reach - margin, x + reach + margin, y + reach + margin);
+  within_reach(from, x, y, radius, AnyReach{}, visit);
 }
 
 template <class P>
@@ -212,45 +213,103 @@ void BasicSpatialIndex<P>::within_many_node(const Node* node, const Cell& cell,
                                             std::uint64_t active, const Reach2& reach2,
                                             Visit& visit) {
   if (node->leaf()) {
+    if (node->count == 0) {
+      return;
+    }
     const SpatialEntry* e = entries(node);
-    for (std::uint32_t i = 0; i < node->count; ++i) {
-      for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
-        const auto k = static_cast<unsigned>(std::countr_zero(bits));
-        const double dx = e[i].x - discs[k].x;
-        const double dy = e[i].y - discs[k].y;
+    // The exact box test, and the leaf's widest entry's reach, per disc.
+    std::uint64_t reached = 0;
+    for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
+      const auto k = static_cast<unsigned>(std::countr_zero(bits));
+      const double box2 = box_distance2(cell, discs[k].x, discs[k].y);
+      if (box2 <= discs[k].prune2 && !beyond_reach(box2, reach2(first + k, e[0].extent))) {
+        reached |= std::uint64_t{1} << k;
+      }
+    }
+    if (reached == 0) {
+      return;
+    }
+    // Disc by disc: the entry loop is then a plain distance test.
+    const std::uint32_t count = node->count;
+    for (std::uint64_t bits = reached; bits != 0; bits &= bits - 1) {
+      const auto k = static_cast<unsigned>(std::countr_zero(bits));
+      const double x = discs[k].x;
+      const double y = discs[k].y;
+      const double r2 = discs[k].r2;
+      for (std::uint32_t i = 0; i < count; ++i) {
+        const double dx = e[i].x - x;
+        const double dy = e[i].y - y;
         const double d2 = dx * dx + dy * dy;
-        if (d2 <= discs[k].r2 && !(d2 > reach2(first + k, e[i].extent))) {
+        if (d2 <= r2 && !(d2 > reach2(first + k, e[i].extent))) {
           visit(first + k, e[i]);
         }
       }
     }
     return;
   }
-  const auto* inner = static_cast<const Inner*>(node);
-  for (unsigned i = 0; i < kWidth; ++i) {
-    const Node* child = inner->child[i];
-    if (child == nullptr) {
-      continue;
-    }
-    const Cell sub = child_cell(cell, i);
-    const bool leaf = child->leaf() && child->count != 0;
-    std::uint64_t reached = 0;
+  // Per axis, the discs whose square reaches column (row) c: its low side lies below the
+  // column's upper boundary and its high side at or above the lower one. The boundaries are
+  // exact (child_of's), and every disc here overlaps this node's square, so only the inner
+  // boundaries need comparing.
+  constexpr unsigned kSide = 1u << kLevelsPerNode;
+  const double child_side = cell.side * (1.0 / static_cast<double>(kSide));
+  std::uint64_t column[kSide];
+  std::uint64_t row[kSide];
+  if constexpr (kLevelsPerNode == 1) {
+    const double mid_x = cell.x + child_side;
+    const double mid_y = cell.y + child_side;
+    std::uint64_t low_x = 0;
+    std::uint64_t high_x = 0;
+    std::uint64_t low_y = 0;
+    std::uint64_t high_y = 0;
     for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
       const auto k = static_cast<unsigned>(std::countr_zero(bits));
-      const double box2 = box_distance2(sub, discs[k].x, discs[k].y);
-      if (box2 > discs[k].prune2) {
-        continue;
-      }
-      if (leaf) {
-        if (beyond_reach(box2, reach2(first + k, entries(child)[0].extent))) {
-          continue;
+      const std::uint64_t bit = std::uint64_t{1} << k;
+      const DiscBounds& d = discs[k];
+      low_x |= d.lo_x < mid_x ? bit : 0;
+      high_x |= d.hi_x >= mid_x ? bit : 0;
+      low_y |= d.lo_y < mid_y ? bit : 0;
+      high_y |= d.hi_y >= mid_y ? bit : 0;
+    }
+    column[0] = low_x;
+    column[1] = high_x;
+    row[0] = low_y;
+    row[1] = high_y;
+  } else {
+    for (unsigned c = 0; c < kSide; ++c) {
+      column[c] = row[c] = active;
+    }
+    for (std::uint64_t bits = active; bits != 0; bits &= bits - 1) {
+      const auto k = static_cast<unsigned>(std::countr_zero(bits));
+      const std::uint64_t bit = std::uint64_t{1} << k;
+      const DiscBounds& d = discs[k];
+      for (unsigned c = 1; c < kSide; ++c) {
+        const double bx = cell.x + static_cast<double>(c) * child_side;
+        const double by = cell.y + static_cast<double>(c) * child_side;
+        // Below the boundary: not in columns c.. ; at or above it: not in columns ..c-1.
+        if (!(d.hi_x >= bx)) {
+          for (unsigned u = c; u < kSide; ++u) column[u] &= ~bit;
+        }
+        if (!(d.lo_x < bx)) {
+          for (unsigned u = 0; u < c; ++u) column[u] &= ~bit;
+        }
+        if (!(d.hi_y >= by)) {
+          for (unsigned u = c; u < kSide; ++u) row[u] &= ~bit;
+        }
+        if (!(d.lo_y < by)) {
+          for (unsigned u = 0; u < c; ++u) row[u] &= ~bit;
         }
       }
-      reached |= std::uint64_t{1} << k;
     }
-    if (reached != 0) {
-      within_many_node(child, sub, discs, first, reached, reach2, visit);
+  }
+  const auto* inner = static_cast<const Inner*>(node);
+  for (unsigned i = 0; i < kWidth; ++i) {
+    const std::uint64_t reached = column[i & (kSide - 1)] & row[i >> kLevelsPerNode];
+    const Node* child = inner->child[i];
+    if (reached == 0 || child == nullptr) {
+      continue;
     }
+    within_many_node(child, child_cell(cell, i), discs, first, reached, reach2, visit);
   }
 }
 
@@ -272,17 +331,21 @@ void BasicSpatialIndex<P>::within_reach(const Subtree& from, std::span<const Dis
       const Disc& d = discs[first + k];
       const double r2 = d.radius * d.radius;
       const double prune2 = r2 + r2 * 0x1p-40;
-      bounds[k] = {d.x, d.y, r2, prune2};
-      bool in_from = false;
-      if (from.node_ != nullptr) {
-        const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
-        const double margin = 0x1p-30 * (std::fabs(d.x) + std::fabs(d.y) + reach);
-        in_from = d.x - reach - margin >= from.x_ && d.x + reach + margin < from.x_ + from.side_ &&
-                  d.y - reach - margin >= from.y_ && d.y + reach + margin < from.y_ + from.side_;
-      }
-      if (in_from) {
+      // Every entry the disc holds lies within `reach` of its centre on each axis; the margin
+      // covers the rounding of these sums (as within(from, ...)'s containment test).
+      const double reach = std::sqrt(prune2) * (1.0 + 0x1p-30);
+      const double margin = 0x1p-30 * (std::fabs(d.x) + std::fabs(d.y) + reach);
+      const double lo_x = d.x - reach - margin;
+      const double hi_x = d.x + reach + margin;
+      const double lo_y = d.y - reach - margin;
+      const double hi_y = d.y + reach + margin;
+      bounds[k] = {d.x, d.y, r2, prune2, lo_x, hi_x, lo_y, hi_y};
+      if (from.node_ != nullptr && lo_x >= from.x_ && hi_x < from.x_ + from.side_ &&
+          lo_y >= from.y_ && hi_y < from.y_ + from.side_) {
         inside |= std::uint64_t{1} << k;
-      } else if (box_distance2(root_cell_, d.x, d.y) <= prune2) {
+      } else if (box_distance2(root_cell_, d.x, d.y) <= prune2 && hi_x >= root_cell_.x &&
+                 lo_x < root_cell_.x + root_cell_.side && hi_y >= root_cell_.y &&
+                 lo_y < root_cell_.y + root_cell_.side) {
         outside |= std::uint64_t{1} << k;
       }
     }

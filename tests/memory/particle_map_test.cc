@@ -158,6 +158,57 @@ TEST_P(ParticleMapTest, RandomSequencesMatchTheOracle) {
   for (std::size_t k = 0; k < kMaps; ++k) EXPECT_TRUE(matches(maps[k], naive[k], rng));
 }
 
+// update_each: runs of updates (moving by centimetres or metres, or not at all) of a few
+// landmarks, on a map that shares its nodes with a copy taken before each run, as the same
+// updates one by one on the oracle; the copies keep their contents.
+TEST_P(ParticleMapTest, UpdateEachMatchesUpdatesOneByOne) {
+  std::mt19937_64 rng(77);
+  ParticleMap map(heap_, GetParam());
+  NaiveMap oracle;
+  for (std::uint64_t id = 0; id < 300; ++id) {
+    const Landmark l = random_landmark(rng, id);
+    const Slot slot = map.insert(l, extent_of(l));
+    oracle.landmarks[slot] = l;
+    oracle.extents[slot] = extent_of(l);
+  }
+  std::uniform_real_distribution<double> step(-1.0, 1.0);
+  for (int run = 0; run < sized(200, 40); ++run) {
+    std::vector<ParticleMap> copies{map};
+    std::vector<NaiveMap> copy_oracles{oracle};
+    std::vector<Slot> slots;
+    for (std::size_t k = 0, n = 1 + rng() % 10; k < n; ++k) {
+      auto it = oracle.landmarks.begin();
+      std::advance(it, static_cast<std::ptrdiff_t>(rng() % oracle.landmarks.size()));
+      if (std::find(slots.begin(), slots.end(), it->first) == slots.end()) {
+        slots.push_back(it->first);
+      }
+    }
+    std::vector<Landmark> next;
+    for (const Slot slot : slots) {
+      Landmark l = oracle.landmarks.at(slot);
+      const double scale = rng() % 3 == 0 ? 20.0 : 0.01;
+      if (rng() % 5 != 0) {
+        l.x += scale * step(rng);
+        l.y += scale * step(rng);
+      }
+      l.sxx += 0.5;
+      next.push_back(l);
+    }
+    map.update_each(
+        slots, [&](std::size_t k, Landmark& l) { l = next[k]; }, extent_of);
+    for (std::size_t k = 0; k < slots.size(); ++k) {
+      const bool moved = next[k].x != oracle.landmarks.at(slots[k]).x ||
+                         next[k].y != oracle.landmarks.at(slots[k]).y;
+      oracle.landmarks[slots[k]] = next[k];
+      if (moved) oracle.extents[slots[k]] = extent_of(next[k]);
+    }
+    ASSERT_TRUE(matches(map, oracle, rng)) << "run " << run;
+    for (std::size_t c = 0; c < copies.size(); ++c) {
+      ASSERT_TRUE(matches(copies[c], copy_oracles[c], rng)) << "run " << run << ", copy " << c;
+    }
+  }
+}
+
 TEST_P(ParticleMapTest, BuiltFromATreeIndexesItsLandmarksInSlotOrder) {
   std::mt19937_64 rng(5);
   LandmarkTree tree(heap_);

@@ -659,6 +659,102 @@ TYPED_TEST(SpatialIndexTest, ResamplingGathers) {
   }
 }
 
+// MoveFinger: runs of moves of entries near each other (small, leaving their leaves, or far),
+// with copies of the index made and changed between the moves (the finger's path becomes
+// shared and must be owned again), as plain moves: the index against the oracle after every
+// run, the copies and the base unchanged by them; and under injected allocation failures, the
+// moves before the failing one done, the failing one not.
+TYPED_TEST(SpatialIndexTest, MoveFingerRunsMatchPlainMoves) {
+  using Index = typename TestFixture::IndexType;
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (Kind kind : {Kind::kUniform, Kind::kClustered, Kind::kDuplicates, Kind::kGrid}) {
+    SCOPED_TRACE(kind_name(kind));
+    Index base(this->heap_);
+    Oracle base_oracle;
+    Slot next = 0;
+    for (int i = 0; i < sized(1500, 300); ++i) {
+      random_change(base, base_oracle, kind, next, rng);
+    }
+    Index index = base;
+    Oracle oracle = base_oracle;
+    for (int run = 0; run < sized(60, 15); ++run) {
+      // The entries nearest a random one, in random order.
+      const SpatialEntry centre = oracle[rng() % oracle.size()];
+      std::vector<std::size_t> near(oracle.size());
+      for (std::size_t i = 0; i < near.size(); ++i) near[i] = i;
+      std::sort(near.begin(), near.end(), [&](std::size_t a, std::size_t b) {
+        return d2(oracle[a], centre.x, centre.y) < d2(oracle[b], centre.x, centre.y);
+      });
+      near.resize(std::min<std::size_t>(near.size(), 1 + rng() % 12));
+      std::shuffle(near.begin(), near.end(), rng);
+      std::vector<Index> copies;
+      std::vector<Oracle> copy_oracles;
+      typename Index::MoveFinger finger(index);
+      for (std::size_t i : near) {
+        SpatialEntry& e = oracle[i];
+        const unsigned op = static_cast<unsigned>(rng() % 10);
+        double x = e.x + 0.01 * unit(rng);  // an EKF update
+        double y = e.y + 0.01 * unit(rng);
+        if (op == 7 || op == 8) {
+          x = e.x + 8.0 * unit(rng);
+          y = e.y + 8.0 * unit(rng);
+        } else if (op == 9) {
+          std::tie(x, y) = random_point(kind, rng);
+        }
+        const float extent = e.slot % 3 == 0 ? 2.0f * e.extent + 1.0f : 0.5f * e.extent;
+        finger.move(e.slot, e.x, e.y, x, y, extent);
+        e = {e.slot, extent, x, y};
+        if (rng() % 4 == 0) {
+          copies.push_back(index);  // shares the finger's path
+          copy_oracles.push_back(oracle);
+          if (rng() % 2 == 0) {  // and changes it: the path's children become shared
+            Slot copy_next = next + 1000000;
+            random_change(copies.back(), copy_oracles.back(), kind, copy_next, rng);
+          }
+        }
+      }
+      ASSERT_TRUE(same_as_brute_force(index, oracle, rng, 3)) << "run " << run;
+      for (std::size_t c = 0; c < copies.size(); ++c) {
+        ASSERT_TRUE(same_as_brute_force(copies[c], copy_oracles[c], rng, 2)) << run << " " << c;
+      }
+    }
+    ASSERT_TRUE(same_as_brute_force(base, base_oracle, rng, 4));
+  }
+  // Allocation failures: a run on a copy (every path shared), failed at its k-th allocation.
+  FailingHeap failing(this->heap_);
+  for (std::int64_t k = 1;; ++k) {
+    Index shared(failing);
+    Oracle oracle;
+    Slot next = 0;
+    for (int i = 0; i < 400; ++i) {
+      random_change(shared, oracle, Kind::kClustered, next, rng);
+    }
+    const Oracle before = oracle;
+    Index index = shared;
+    typename Index::MoveFinger finger(index);
+    failing.fail_at(k);
+    bool threw = false;
+    try {
+      for (std::size_t i = 0; i < 8; ++i) {
+        SpatialEntry& e = oracle[(i * 37) % oracle.size()];
+        const double x = e.x + (i % 3 == 2 ? 5.0 : 0.001);
+        finger.move(e.slot, e.x, e.y, x, e.y, e.extent);
+        e.x = x;
+      }
+    } catch (const std::bad_alloc&) {
+      threw = true;
+    }
+    failing.disarm();
+    ASSERT_TRUE(same_as_brute_force(index, oracle, rng, 3)) << "failed at " << k;
+    ASSERT_TRUE(same_as_brute_force(shared, before, rng, 2)) << "failed at " << k;
+    if (!threw) {
+      EXPECT_GT(k, 1);
+      break;
+    }
+  }
+}
+
 TYPED_TEST(SpatialIndexTest, StrongGuaranteeOnAllocationFailure) {
   using Index = typename TestFixture::IndexType;
   FailingHeap failing(this->heap_);

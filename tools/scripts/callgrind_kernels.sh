@@ -4,7 +4,11 @@
 #   1. the bare 2x2 EKF floor (BM_BareEkfFloor's bare_ekf_update, bench/engine/
 #      landmark_ekf_benchmark.cc) and the engine's own landmark update (update_landmark, called
 #      through engine_ekf_update there): Ir per call, libm's atan2 and log included;
-#   2. `fastslam bench scaling` at N landmarks, M particles, FS1 or FS2, ML or known, with
+#   2. the association kernel (BM_AssociationKernel's association_kernel, bench/engine/
+#      association_benchmark.cc: one particle's candidate search and ML choice for a scan of 8
+#      observations) with about 10, 100 and 1000 landmarks inside each search disc: Ir per
+#      particle-observation and as a multiple of the floor;
+#   3. `fastslam bench scaling` at N landmarks, M particles, FS1 or FS2, ML or known, with
 #      collection switched on only inside Filter::observe (the pass runs the queued controls,
 #      association, updates, then resampling): Ir per particle-observation, and the functions
 #      with the most inclusive Ir.
@@ -21,7 +25,8 @@ algorithm=${4:-fastslam1}
 association=${5:-ml}
 export CCACHE_BASEDIR=$root CCACHE_NOHASHDIR=1
 cmake --preset callgrind >/dev/null
-cmake --build --preset callgrind --target fastslam landmark_ekf_benchmark -- -j2 >/dev/null
+cmake --build --preset callgrind --target fastslam landmark_ekf_benchmark association_benchmark \
+  -- -j2 >/dev/null
 out=build/callgrind/cg
 mkdir -p "$out"
 
@@ -57,6 +62,18 @@ valgrind --tool=callgrind --callgrind-out-file="$out/floor.out" \
   >"$out/floor.log" 2>&1
 echo -n "bare_ekf_update: " && per_call "$out/floor.out" 'bench::bare_ekf_update\('
 echo -n "update_landmark (engine_ekf_update): " && per_call "$out/floor.out" 'bench::engine_ekf_update\('
+
+floor=$(per_call "$out/floor.out" 'bench::bare_ekf_update\(' | cut -d' ' -f1)
+echo "== the association kernel (association_kernel, 8 observations a call), Ir per particle-observation"
+for k in 10 100 1000; do
+  valgrind --tool=callgrind --callgrind-out-file="$out/kernel_$k.out" \
+    build/callgrind/bench/engine/association_benchmark \
+    --benchmark_filter="BM_AssociationKernel/in_disc:$k/" --benchmark_min_time=0.02 \
+    >"$out/kernel_$k.log" 2>&1
+  per_call "$out/kernel_$k.out" 'bench::association_kernel\(' | awk -v k="$k" -v f="$floor" \
+    '{ printf "~%s landmarks in the disc: %.0f Ir per particle-observation, %.1fx the floor\n",
+       k, $1 / 8, $1 / 8 / f }'
+done
 
 echo "== fastslam bench scaling: N = $n, M = $m, $updates updates, $algorithm, $association"
 start=$SECONDS
