@@ -8,7 +8,8 @@
 // (atomic counts, shared nodes never written).
 // Costs (N landmarks, h = O(log N)): copy, move, size O(1); find, at O(h); edit, set, insert_at
 // O(h) with up to h + 1 allocations (insert_at: h of the slot's tree); insert, erase
-// O(h 2^kInnerBits); freeing is iterative and frees exactly the nodes no other map holds.
+// O(h 2^kInnerBits); diff O(nodes not shared); freeing is iterative and frees exactly the nodes
+// no other map holds.
 #pragma once
 
 #include <array>
@@ -108,6 +109,13 @@ class BasicLandmarkTree {
   // Removes every landmark (releases this handle's reference to the root).
   void clear() noexcept;
 
+  // visit(slot, mine, theirs) for every slot where this tree and `other` differ: a landmark in
+  // one only (the other's pointer null) or unequal landmarks, in increasing slot order. Shared
+  // subtrees are skipped unvisited, so two maps that differ by a scan's updates cost those
+  // paths, not their size. `visit` must not change either tree.
+  template <class Visit>
+  void diff(const BasicLandmarkTree& other, Visit&& visit) const;
+
   // Ordered iteration over (slot, landmark), in increasing slot order.
   struct Entry {
     Slot slot;
@@ -118,6 +126,12 @@ class BasicLandmarkTree {
   Iterator end() const noexcept;
 
  private:
+  // Writes and rebuilds trees node by node, sharing included (memory/tree_graph.h).
+  template <class>
+  friend class BasicTreeGraphWriter;
+  template <class>
+  friend class BasicTreeGraphReader;
+
   using Refcount = typename Policy::RefcountType;
   struct Node {
     Node() = default;
@@ -163,6 +177,10 @@ class BasicLandmarkTree {
   void prune(Slot slot) noexcept;
   // The lowest free slot below capacity(), or capacity() when the tree is full.
   std::uint64_t lowest_free_slot() const noexcept;
+  // diff's walk over two subtrees covering slots from `base` (null: no landmarks there).
+  template <class Visit>
+  static void diff_nodes(const Node* a, unsigned height_a, const Node* b, unsigned height_b,
+                         std::uint64_t base, Visit& visit);
 
   Node* root_ = nullptr;
   NodeHeap* heap_;

@@ -34,6 +34,13 @@ class ParticleMap {
   // entered in slot order. Throws as SpatialIndex::insert.
   template <class ExtentOf>
   ParticleMap(LandmarkTree tree, Indexing indexing, const ExtentOf& extent_of);
+  // The map of `tree`'s landmarks, in `near`'s indexing, its index `near`'s (shared) changed by
+  // the landmarks where the two trees differ (LandmarkTree::diff): a map read back beside
+  // others it shares most of its landmarks with shares most of its index too, in O(differing
+  // paths). The entries are those the constructor above makes: same slots, positions and
+  // extents. REQUIRES: both on the same heap. Throws as SpatialIndex::insert.
+  template <class ExtentOf>
+  ParticleMap(LandmarkTree tree, const ParticleMap& near, const ExtentOf& extent_of);
 
   Indexing indexing() const noexcept { return indexed_ ? Indexing::kSpatial : Indexing::kNone; }
   bool indexed() const noexcept { return indexed_; }
@@ -101,6 +108,22 @@ ParticleMap::ParticleMap(LandmarkTree tree, Indexing indexing, const ExtentOf& e
       index_.insert(slot, landmark.x, landmark.y, extent_of(landmark));
     }
   }
+}
+
+template <class ExtentOf>
+ParticleMap::ParticleMap(LandmarkTree tree, const ParticleMap& near, const ExtentOf& extent_of)
+    : tree_(std::move(tree)), index_(near.index_), indexed_(near.indexed_) {
+  if (!indexed_) return;
+  tree_.diff(near.tree_, [&](Slot slot, const Landmark* mine, const Landmark* theirs) {
+    if (theirs == nullptr) {
+      index_.insert(slot, mine->x, mine->y, extent_of(*mine));
+    } else if (mine == nullptr) {
+      index_.erase(slot, theirs->x, theirs->y);
+    } else if (mine->x != theirs->x || mine->y != theirs->y ||
+               extent_of(*mine) != extent_of(*theirs)) {
+      index_.move(slot, theirs->x, theirs->y, mine->x, mine->y, extent_of(*mine));
+    }
+  });
 }
 
 template <class Change, class ExtentOf>

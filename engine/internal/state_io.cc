@@ -15,12 +15,13 @@
 #include <Eigen/Eigenvalues>
 
 #include "engine/internal/map_update.h"
+#include "memory/tree_graph.h"
 
 namespace fastslam::engine::internal {
 namespace {
 
 constexpr char kMagic[8] = {'F', 'S', 'L', 'A', 'M', 'S', 'T', '1'};
-constexpr std::uint32_t kVersion = 4;  // 4: the evidence and the landmarks created and removed
+constexpr std::uint32_t kVersion = 5;  // 5: the maps as one graph of shared nodes
 constexpr std::uint64_t kLimit = std::uint64_t{1} << 34;
 
 [[noreturn]] void corrupt(const std::string& what) {
@@ -122,16 +123,8 @@ static_assert(sizeof(PendingControl) == 32 && sizeof(TrajectoryPoint) == 32,
               "saved structs must have no padding");
 
 void put_maps(const memory::ParticleStore& store, std::ostream& out) {
-  for (std::size_t i = 0; i < store.size(); ++i) {
-    const bool same = i > 0 && store.map(i).shares_root_with(store.map(i - 1));
-    put<std::uint8_t>(out, same ? 1 : 0);
-    if (same) continue;
-    put<std::uint64_t>(out, store.map(i).size());
-    for (const auto [slot, lm] : store.map(i)) {
-      put(out, slot);
-      put(out, lm);
-    }
-  }
+  memory::TreeGraphWriter graph(out);
+  for (std::size_t i = 0; i < store.size(); ++i) graph.write(store.map(i).tree());
 }
 
 // The config, checked before any of its values is used: a bool must be 0 or 1, and the values
@@ -219,28 +212,6 @@ void check_landmark(const memory::Landmark& lm, memory::Slot slot, std::size_t p
   }
   if (!known_ids.empty() && lm.id != static_cast<std::uint64_t>(known_ids[slot])) {
     corrupt(where() + "id differs from the known-id table's");
-  }
-}
-
-// Rebuilds one map with the same slots, each landmark stored in its own slot (insert_at), so a
-// hole costs nothing: work and memory are O(h) per landmark read, whatever the slots' values.
-// Slots strictly increase; with known association every map holds exactly the K known slots.
-void get_map(std::istream& in, bool known_association, const std::vector<std::int64_t>& known_ids,
-             std::size_t particle, std::uint64_t step, memory::LandmarkTree& map) {
-  const auto count = get<std::uint64_t>(in);
-  if (known_association ? count != known_ids.size() : count > kLimit) {
-    corrupt("map size of particle " + std::to_string(particle));
-  }
-  memory::Slot previous = 0;
-  for (std::uint64_t k = 0; k < count; ++k) {
-    const auto slot = get<memory::Slot>(in);
-    const auto lm = get<memory::Landmark>(in);
-    if ((known_association && slot >= known_ids.size()) || (k > 0 && slot <= previous)) {
-      corrupt("slots of particle " + std::to_string(particle) + " out of order or range");
-    }
-    previous = slot;
-    check_landmark(lm, slot, particle, step, known_ids);
-    map.insert_at(slot, lm);
   }
 }
 
@@ -418,17 +389,33 @@ void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
   s.associations = std::move(h.associations);
   memory::ParticleStore& store = s.store;
   get_columns(in, store);
+  // The maps, as the graph of nodes they shared when saved (memory/tree_graph.h). Each index is
+  // the previous particle's changed where the maps differ, so indices share as the maps do.
+  // With known ids every map holds exactly the K known slots: K landmarks, all below K.
   const bool known_ids = s.config.association == Association::kKnown;
-  for (std::size_t i = 0; i < store.size(); ++i) {
-    const auto flag = get<std::uint8_t>(in);
-    if (flag > 1 || (flag == 1 && i == 0)) corrupt("map sharing");
-    if (flag == 1) {
-      store.map(i) = store.map(i - 1);
-      continue;
+  const std::size_t known_count = h.known_ids.size();
+  memory::TreeGraphReader graph(in, s.heap);
+  try {
+    for (std::size_t i = 0; i < store.size(); ++i) {
+      memory::LandmarkTree map = graph.read([&](memory::Slot slot, const memory::Landmark& lm) {
+        if (known_ids && slot >= known_count) {
+          corrupt("slot " + std::to_string(slot) + " of particle " + std::to_string(i) +
+                  " beyond the known ids");
+        }
+        check_landmark(lm, slot, i, s.counters.step, h.known_ids);
+      });
+      if (known_ids && map.size() != known_count) {
+        corrupt("map size of particle " + std::to_string(i));
+      }
+      store.map(i) = i == 0 ? memory::ParticleMap(std::move(map), store.options().indexing,
+                                                  largest_variance)
+                            : memory::ParticleMap(std::move(map), store.map(i - 1),
+                                                  largest_variance);
     }
-    memory::LandmarkTree map(s.heap);
-    get_map(in, known_ids, h.known_ids, i, s.counters.step, map);
-    store.map(i) = memory::ParticleMap(std::move(map), store.options().indexing, largest_variance);
+    graph.finish();
+  } catch (const memory::TreeGraphError& e) {
+    if (graph.truncated()) throw std::runtime_error("Filter::load: truncated or unreadable state");
+    corrupt(e.what());
   }
 }
 

@@ -2,20 +2,21 @@
 // format of native byte order: magic, version, sizeof(FilterConfig), the config bytes (padding
 // zeroed), counters, the landmark variance bound, the clock, the last scan's report, queued
 // controls, recorded trajectory points, the known-id table, the FastSLAM 2.0 covariances, the
-// particle columns, then per particle either "same map as particle i-1" or its landmarks (slot,
-// value). Spatial indices are not
-// written: they are rebuilt from the maps (an index's entries are its map's slots and means, and
-// queries are exact, so the rebuilt index answers the same). Equal states save equal bytes.
+// particle columns, then the particles' maps as one graph of nodes (memory/tree_graph.h): a
+// node shared by many maps is written once and read back shared, so a state costs the
+// particle set's distinct nodes and loads into the same live-node count. Spatial indices are
+// not written: each is rebuilt from the previous particle's by the landmarks where the two
+// maps differ (an index's entries are its map's slots and means, and queries are exact, so
+// the rebuilt index answers the same). Equal states save equal bytes.
 // Loading trusts nothing: every field is checked against the invariants the engine relies on
 // (counters that add up, steps already taken, finite numbers, positive definite landmark
-// covariances, distinct known ids that match every map, slots in increasing order) and refused
+// covariances, distinct known ids that match every map, a well-formed node graph) and refused
 // with std::runtime_error naming the field. Work and memory are bounded by the input's size:
 // vectors are read in bounded chunks, so a corrupt length fails once the stream runs out instead
 // of allocating what it claims; the particles are allocated only after the covariances (25
-// doubles per particle) were read; a landmark is stored in its slot directly, so a slot far
-// beyond the others costs a tree path (O(log N) nodes), not the holes below it.
-// Thread safety: thread-compatible. Costs: O(M N) worst case (maps that share a root are written
-// once); load allocates as the stream delivers, at most a small multiple of the bytes read.
+// doubles per particle) were read; a node is made only after its record was read.
+// Thread safety: thread-compatible. Costs: O(distinct nodes) to save and load, plus the
+// indices' changes between neighbouring particles.
 #pragma once
 
 #include <iosfwd>

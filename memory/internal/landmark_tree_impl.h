@@ -360,6 +360,56 @@ void BasicLandmarkTree<P>::prune(Slot slot) noexcept {
 }
 
 template <class P>
+template <class Visit>
+void BasicLandmarkTree<P>::diff(const BasicLandmarkTree& other, Visit&& visit) const {
+  diff_nodes(root_, height_, other.root_, other.height_, 0, visit);
+}
+
+template <class P>
+template <class Visit>
+void BasicLandmarkTree<P>::diff_nodes(const Node* a, unsigned height_a, const Node* b,
+                                      unsigned height_b, std::uint64_t base, Visit& visit) {
+  if ((a == b && height_a == height_b) || (a == nullptr && b == nullptr)) {
+    return;  // shared, or both empty
+  }
+  if (height_a != height_b) {
+    // The shorter tree's slots are the taller one's first child's (roots grow above child 0).
+    const bool a_taller = height_a > height_b;
+    const Node* tall = a_taller ? a : b;
+    const unsigned h = a_taller ? height_a : height_b;
+    for (unsigned i = 0; i < kInnerWidth; ++i) {
+      const Node* child = tall == nullptr ? nullptr : static_cast<const Inner*>(tall)->child[i];
+      const Node* other = i == 0 ? (a_taller ? b : a) : nullptr;
+      const unsigned other_height = i == 0 ? (a_taller ? height_b : height_a) : h - 1;
+      const std::uint64_t at = base + i * capacity_at(h - 1);
+      if (a_taller) {
+        diff_nodes(child, h - 1, other, other_height, at, visit);
+      } else {
+        diff_nodes(other, other_height, child, h - 1, at, visit);
+      }
+    }
+    return;
+  }
+  if (height_a == 0) {
+    const std::uint32_t in_a = a == nullptr ? 0 : a->aux;
+    const std::uint32_t in_b = b == nullptr ? 0 : b->aux;
+    for (unsigned i = 0; i < kLeafWidth; ++i) {
+      const Landmark* la = (in_a >> i & 1u) ? &static_cast<const Leaf*>(a)->landmarks[i] : nullptr;
+      const Landmark* lb = (in_b >> i & 1u) ? &static_cast<const Leaf*>(b)->landmarks[i] : nullptr;
+      if ((la != nullptr || lb != nullptr) && !(la != nullptr && lb != nullptr && *la == *lb)) {
+        visit(static_cast<Slot>(base + i), la, lb);
+      }
+    }
+    return;
+  }
+  for (unsigned i = 0; i < kInnerWidth; ++i) {
+    const Node* ca = a == nullptr ? nullptr : static_cast<const Inner*>(a)->child[i];
+    const Node* cb = b == nullptr ? nullptr : static_cast<const Inner*>(b)->child[i];
+    diff_nodes(ca, height_a - 1, cb, height_b - 1, base + i * capacity_at(height_a - 1), visit);
+  }
+}
+
+template <class P>
 auto BasicLandmarkTree<P>::begin() const noexcept -> Iterator {
   Iterator it;
   it.root_ = root_;

@@ -275,49 +275,79 @@ TEST(StateIoTest, FuzzerFindingsAreRefusedByName) {
   }
 }
 
-// The fix for a slot far beyond the others: the old loader filled the holes below it with
-// placeholders (2^24 of them, 1.2 GB, for an 8 KB file). Now each landmark costs one tree path,
-// so a map whose last slot is 2^32 - 16 loads with a handful of nodes per landmark, and a slot
-// that repeats or goes back is refused.
-TEST(StateIoTest, SlotsFarApartCostAPathNotTheHolesBelow) {
+// A slot far beyond the others costs one tree path (the old loader filled the holes below it
+// with placeholders: 2^24 of them, 1.2 GB, for an 8 KB file), and the maps come back with the
+// nodes they had: a far slot's path, shared roots and subtrees, no more. A leaf record moved to
+// another slot is refused by name.
+TEST(StateIoTest, MapsComeBackWithTheirNodesAndFarSlotsCostAPath) {
   FilterConfig c;
-  c.particles = 1;
+  c.particles = 4;
   c.association = Association::kMaximumLikelihood;
   FilterState s(c);
   fill(s);
-  const std::string good = save(s, {});
-  // The map is the stream's tail: 8 (count) + 5 x (4 slot + 64 landmark); the last slot:
-  const std::size_t last_slot_at = good.size() - 64 - 4;
-  std::string far = good;
   const memory::Slot kFar = 0xFFFF'FFF0u;
-  std::memcpy(far.data() + last_slot_at, &kFar, sizeof(kFar));
-  std::istringstream in(far);
+  const memory::Landmark far{3.0, 4.0, 0.1, 0.0, 0.2, 1.0, 77, 2};
+  memory::LandmarkTree tree = s.store.map(0).tree();
+  tree.insert_at(kFar, far);
+  s.store.map(0) = memory::ParticleMap(std::move(tree), memory::Indexing::kSpatial,
+                                       largest_variance);
+  const std::string good = save(s, {});
+  std::istringstream in(good);
   StateHeader header = read_header(in);
   FilterState loaded(header.config);
   read_particles(in, std::move(header), loaded);
-  ASSERT_EQ(loaded.store.map(0).size(), 5u);
-  EXPECT_NE(loaded.store.map(0).find(kFar), nullptr);
-  const std::int64_t per_landmark =
-      memory::LandmarkTree::kMaxHeight + 1 + 4;  // a path, and the index's share
-  EXPECT_LE(loaded.heap.stats().live_nodes, 5 * per_landmark);
-
-  for (const memory::Slot bad : {memory::Slot{0}, memory::Slot{4}}) {  // repeats / goes back
-    std::string b = good;
-    std::memcpy(b.data() + last_slot_at, &bad, sizeof(bad));
-    std::vector<TrajectoryPoint> unused;
-    EXPECT_THROW(
-        {
-          try {
-            round_trip(b, &unused);
-          } catch (const std::runtime_error& e) {
-            EXPECT_NE(std::string(e.what()).find("slots of particle 0 out of order"),
-                      std::string::npos)
-                << e.what();
-            throw;
-          }
-        },
-        std::runtime_error);
+  ASSERT_EQ(loaded.store.map(0).size(), 6u);
+  EXPECT_EQ(*loaded.store.map(0).find(kFar), far);
+  for (std::size_t i = 1; i < 4; ++i) {
+    EXPECT_EQ(loaded.store.map(i).shares_root_with(loaded.store.map(i - 1)),
+              s.store.map(i).shares_root_with(s.store.map(i - 1)));
   }
+  const std::int64_t per_landmark = memory::LandmarkTree::kMaxHeight + 1 + 4;  // path + index
+  EXPECT_LE(loaded.heap.stats().live_nodes, 2 * 6 * per_landmark);
+
+  // The far landmark's leaf record: tag 0, base slot, occupancy 1, the landmark.
+  std::string leaf(1, '\0');
+  leaf.append(reinterpret_cast<const char*>(&kFar), 4);
+  const std::uint32_t one = 1;
+  leaf.append(reinterpret_cast<const char*>(&one), 4);
+  leaf.append(reinterpret_cast<const char*>(&far), sizeof(far));
+  const std::size_t at = good.find(leaf);
+  ASSERT_NE(at, std::string::npos);
+  std::string moved = good;
+  const memory::Slot elsewhere = 0xFFFF'FF00u;
+  std::memcpy(moved.data() + at + 1, &elsewhere, sizeof(elsewhere));
+  std::vector<TrajectoryPoint> unused;
+  try {
+    round_trip(moved, &unused);
+    ADD_FAILURE() << "a leaf moved to another slot loaded";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("corrupt state (map graph"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("not its place under the node"), std::string::npos)
+        << e.what();
+  }
+}
+
+// Known ids keep no index: a loaded state holds exactly the nodes the saved one did, after
+// maps that were copied and then changed apart (shared subtrees, not only shared roots).
+TEST(StateIoTest, KnownIdMapsLoadIntoTheSameNodes) {
+  FilterConfig c;
+  c.particles = 6;
+  c.association = Association::kKnown;
+  FilterState s(c);
+  fill(s);
+  for (std::size_t i = 1; i < 6; ++i) {
+    s.store.map(i) = s.store.map(0);
+    s.store.map(i).edit_unindexed(static_cast<memory::Slot>(i % 6)).x += 0.25 * i;
+  }
+  const std::string bytes = save(s, {});
+  std::istringstream in(bytes);
+  StateHeader header = read_header(in);
+  FilterState loaded(header.config);
+  read_particles(in, std::move(header), loaded);
+  EXPECT_EQ(loaded.heap.stats().live_nodes, s.heap.stats().live_nodes);
+  EXPECT_EQ(loaded.heap.stats().live_bytes, s.heap.stats().live_bytes);
+  EXPECT_EQ(save(loaded, {}), bytes);
 }
 
 }  // namespace

@@ -1,0 +1,118 @@
+// Many landmark trees written and read back as one graph of nodes, each node once, so a set of
+// maps that share subtrees (a particle set after resampling) costs its distinct nodes, not
+// particles x landmarks, and reads back with exactly the sharing it had: the same nodes, the
+// same live-node count. Used by the filter's saved state (engine/internal/state_io.cc).
+//
+// Format, native byte order; a record per node, children before parents, then a record per tree:
+//   leaf   u8 0, u32 base slot, u32 occupancy mask, then one Landmark per set bit, lowest first
+//   inner  u8 1, u8 height, u32 base slot, u32 child mask, then a u32 node id per set bit
+//   tree   u8 2, u8 height, u32 root id (kNoNode: the empty tree)
+// Node ids number the node records from 0 in the order written, over the whole graph.
+//
+// The reader trusts nothing: a record must be well formed (a known tag, no bits beyond the
+// node's width, no empty node), a child must be an earlier node one level lower whose base slot
+// is its place under the parent, a root must have base 0 and the tree's height, every landmark
+// passes the caller's check (given its slot), and finish() refuses nodes no tree holds. Errors
+// throw TreeGraphError naming the record. A node is allocated only after its record was read,
+// so memory grows at most ~30x as fast as the input (an empty-free leaf record is >= 73 bytes
+// for a 272-byte node; an inner record >= 14 bytes for a 136-byte node).
+//
+// Ownership: the writer keeps the addresses of the nodes it wrote, so the trees must stay
+// alive and unchanged while it is used; the reader holds a reference to every node it made
+// until it is destroyed. Thread safety: thread-compatible. Costs: O(distinct nodes) time and
+// memory for either side (a hash map of node addresses in the writer).
+#pragma once
+
+#include <cstdint>
+#include <istream>
+#include <ostream>
+#include <stdexcept>
+#include <unordered_map>
+#include <vector>
+
+#include "memory/landmark_tree.h"
+
+namespace fastslam::memory {
+
+class TreeGraphError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr std::uint32_t kNoNode = 0xffffffffu;
+
+template <class Policy>
+class BasicTreeGraphWriter {
+ public:
+  using Tree = BasicLandmarkTree<Policy>;
+
+  explicit BasicTreeGraphWriter(std::ostream& out) : out_(&out) {}
+
+  // Writes the nodes of `tree` not written yet, then its tree record. Stream errors are the
+  // stream's state, for the caller to check.
+  void write(const Tree& tree);
+
+  std::uint64_t nodes_written() const noexcept { return ids_.size(); }
+
+ private:
+  using Node = typename Tree::Node;
+  std::uint32_t write_node(const Node* node, unsigned height, std::uint64_t base);
+
+  std::ostream* out_;
+  std::unordered_map<const Node*, std::uint32_t> ids_;
+};
+
+template <class Policy>
+class BasicTreeGraphReader {
+ public:
+  using Tree = BasicLandmarkTree<Policy>;
+
+  // Nodes come from `heap`, which must outlive the trees read.
+  BasicTreeGraphReader(std::istream& in, NodeHeap& heap) : in_(&in), heap_(&heap) {}
+  BasicTreeGraphReader(const BasicTreeGraphReader&) = delete;
+  BasicTreeGraphReader& operator=(const BasicTreeGraphReader&) = delete;
+  ~BasicTreeGraphReader();
+
+  // Reads node records up to the next tree record and returns that tree. check(slot, landmark)
+  // is called once per landmark read and may throw to refuse it. Throws TreeGraphError on a
+  // malformed or truncated graph (`truncated()` then says which), and what `check` or the heap
+  // throws.
+  template <class Check>
+  Tree read(Check&& check);
+
+  // Throws TreeGraphError when a node read is held by no tree read (an orphan record).
+  void finish() const;
+
+  // True when the last error was the stream running out.
+  bool truncated() const noexcept { return truncated_; }
+
+ private:
+  using Node = typename Tree::Node;
+  using Inner = typename Tree::Inner;
+  using Leaf = typename Tree::Leaf;
+  struct Made {
+    Node* node;
+    std::uint64_t base;
+    std::uint32_t height;
+    std::uint32_t count;  // landmarks below
+  };
+
+  template <class T>
+  T get();
+  [[noreturn]] void fail(const std::string& what) const;
+  template <class Check>
+  void read_leaf(Check& check);
+  void read_inner();
+
+  std::istream* in_;
+  NodeHeap* heap_;
+  std::vector<Made> made_;  // every node read, in id order, one reference each
+  bool truncated_ = false;
+};
+
+using TreeGraphWriter = BasicTreeGraphWriter<DefaultTreePolicy>;
+using TreeGraphReader = BasicTreeGraphReader<DefaultTreePolicy>;
+
+}  // namespace fastslam::memory
+
+#include "memory/internal/tree_graph_impl.h"
