@@ -27,7 +27,6 @@ Prints a Markdown table; --json keeps every time and the summary rows.
 import argparse
 import json
 import os
-import platform
 import resource
 import shutil
 import statistics
@@ -35,6 +34,10 @@ import subprocess
 import sys
 import tempfile
 import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..",
+                                "tools", "scripts"))
+from results import machine  # noqa: E402  (one description of the machine for every table)
 
 
 def timed(cmd, cwd=None):
@@ -46,19 +49,6 @@ def timed(cmd, cwd=None):
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return wall * 1e3, cpu * 1e3
-
-
-def machine():
-    model = platform.processor() or "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return f"{model}, {os.cpu_count()} cores, Linux {platform.release()}"
 
 
 def cases(opts, scratch):

@@ -622,40 +622,41 @@ void stroke(Svg& svg, const Style& style) {
   if (style.dash != nullptr) svg.s(" stroke-dasharray=\"").s(style.dash).s("\"");
 }
 
-void polyline(Svg& svg, const char* id, const std::vector<Vertex>& path, const Style& style,
-              const Panel& p) {
-  if (path.empty()) return;
+// One <path> element of `count` pieces in `style`: draw(d, i) adds piece i to its data.
+template <class Draw>
+void styled_path(Svg& svg, const char* id, std::size_t count, const Style& style, Draw&& draw) {
+  if (count == 0) return;
   svg.s("<path id=\"").s(id).s("\"");
   stroke(svg, style);
   svg.s(" d=\"");
   PathData d(svg.t());
-  for (std::size_t i = 0; i < path.size(); ++i) {
-    if (i == 0 || path[i].segment != path[i - 1].segment) {
-      d.move_to(p.X(path[i].x), p.Y(path[i].y));
-    } else {
-      d.line_to(p.X(path[i].x), p.Y(path[i].y));
-    }
+  for (std::size_t i = 0; i < count; ++i) {
+    draw(d, i);
     if (i % 1024 == 0) svg.flush(false);
   }
   svg.s("\"/>\n");
 }
 
+void polyline(Svg& svg, const char* id, const std::vector<Vertex>& path, const Style& style,
+              const Panel& p) {
+  styled_path(svg, id, path.size(), style, [&](PathData& d, std::size_t i) {
+    if (i == 0 || path[i].segment != path[i - 1].segment) {
+      d.move_to(p.X(path[i].x), p.Y(path[i].y));
+    } else {
+      d.line_to(p.X(path[i].x), p.Y(path[i].y));
+    }
+  });
+}
+
 void markers(Svg& svg, const char* id, const std::vector<Point>& points, const Style& style,
              const Panel& p) {
-  if (points.empty()) return;
-  svg.s("<path id=\"").s(id).s("\"");
-  stroke(svg, style);
-  svg.s(" d=\"");
-  PathData d(svg.t());
-  for (std::size_t i = 0; i < points.size(); ++i) {
+  styled_path(svg, id, points.size(), style, [&](PathData& d, std::size_t i) {
     if (style.kind == Style::kPlus) {
       d.plus(p.X(points[i].x), p.Y(points[i].y), style.arm);
     } else {
       d.dot(p.X(points[i].x), p.Y(points[i].y));
     }
-    if (i % 1024 == 0) svg.flush(false);
-  }
-  svg.s("\"/>\n");
+  });
 }
 
 // The 2-sigma ellipse of each estimate (plot_run.py's `ellipse`); y is down in the picture, so
