@@ -112,9 +112,17 @@ class BasicLandmarkTree {
   // visit(slot, mine, theirs) for every slot where this tree and `other` differ: a landmark in
   // one only (the other's pointer null) or unequal landmarks, in increasing slot order. Shared
   // subtrees are skipped unvisited, so two maps that differ by a scan's updates cost those
-  // paths, not their size. `visit` must not change either tree.
+  // paths, not their size. Each pair of nodes compared takes one step of `steps`; when none is
+  // left the walk stops and diff returns false (a caller bounding its work by its input's
+  // size). `visit` must not change either tree.
   template <class Visit>
-  void diff(const BasicLandmarkTree& other, Visit&& visit) const;
+  bool diff(const BasicLandmarkTree& other, Visit&& visit,
+            std::uint64_t& steps) const;
+  template <class Visit>
+  void diff(const BasicLandmarkTree& other, Visit&& visit) const {
+    std::uint64_t unbounded = ~std::uint64_t{0};
+    diff(other, visit, unbounded);
+  }
 
   // Ordered iteration over (slot, landmark), in increasing slot order.
   struct Entry {
@@ -179,8 +187,8 @@ class BasicLandmarkTree {
   std::uint64_t lowest_free_slot() const noexcept;
   // diff's walk over two subtrees covering slots from `base` (null: no landmarks there).
   template <class Visit>
-  static void diff_nodes(const Node* a, unsigned height_a, const Node* b, unsigned height_b,
-                         std::uint64_t base, Visit& visit);
+  static bool diff_nodes(const Node* a, unsigned height_a, const Node* b, unsigned height_b,
+                         std::uint64_t base, Visit& visit, std::uint64_t& steps);
 
   Node* root_ = nullptr;
   NodeHeap* heap_;

@@ -14,7 +14,9 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <span>
+#include <stdexcept>
 #include <utility>
 
 #include "memory/landmark_tree.h"
@@ -38,9 +40,12 @@ class ParticleMap {
   // the landmarks where the two trees differ (LandmarkTree::diff): a map read back beside
   // others it shares most of its landmarks with shares most of its index too, in O(differing
   // paths). The entries are those the constructor above makes: same slots, positions and
-  // extents. REQUIRES: both on the same heap. Throws as SpatialIndex::insert.
+  // extents. Each node pair compared and each entry changed takes a step of `steps`; throws
+  // std::length_error when they run out (a loader bounding its work by its input). REQUIRES:
+  // both on the same heap. Throws as SpatialIndex::insert.
   template <class ExtentOf>
-  ParticleMap(LandmarkTree tree, const ParticleMap& near, const ExtentOf& extent_of);
+  ParticleMap(LandmarkTree tree, const ParticleMap& near, const ExtentOf& extent_of,
+              std::uint64_t& steps);
 
   Indexing indexing() const noexcept { return indexed_ ? Indexing::kSpatial : Indexing::kNone; }
   bool indexed() const noexcept { return indexed_; }
@@ -111,10 +116,13 @@ ParticleMap::ParticleMap(LandmarkTree tree, Indexing indexing, const ExtentOf& e
 }
 
 template <class ExtentOf>
-ParticleMap::ParticleMap(LandmarkTree tree, const ParticleMap& near, const ExtentOf& extent_of)
+ParticleMap::ParticleMap(LandmarkTree tree, const ParticleMap& near, const ExtentOf& extent_of,
+                         std::uint64_t& steps)
     : tree_(std::move(tree)), index_(near.index_), indexed_(near.indexed_) {
   if (!indexed_) return;
-  tree_.diff(near.tree_, [&](Slot slot, const Landmark* mine, const Landmark* theirs) {
+  const auto change = [&](Slot slot, const Landmark* mine, const Landmark* theirs) {
+    if (steps == 0) throw std::length_error("ParticleMap: the maps differ by more than allowed");
+    --steps;
     if (theirs == nullptr) {
       index_.insert(slot, mine->x, mine->y, extent_of(*mine));
     } else if (mine == nullptr) {
@@ -123,7 +131,10 @@ ParticleMap::ParticleMap(LandmarkTree tree, const ParticleMap& near, const Exten
                extent_of(*mine) != extent_of(*theirs)) {
       index_.move(slot, theirs->x, theirs->y, mine->x, mine->y, extent_of(*mine));
     }
-  });
+  };
+  if (!tree_.diff(near.tree_, change, steps)) {
+    throw std::length_error("ParticleMap: the maps differ by more than allowed");
+  }
 }
 
 template <class Change, class ExtentOf>

@@ -14,8 +14,8 @@
 // is its place under the parent, a root must have base 0 and the tree's height, every landmark
 // passes the caller's check (given its slot), and finish() refuses nodes no tree holds. Errors
 // throw TreeGraphError naming the record. A node is allocated only after its record was read,
-// so memory grows at most ~30x as fast as the input (an empty-free leaf record is >= 73 bytes
-// for a 272-byte node; an inner record >= 14 bytes for a 136-byte node).
+// so memory grows at most ~10x as fast as the input (a leaf record, never empty, is >= 73 bytes
+// for a 264-byte node; an inner record >= 14 bytes for a 136-byte node).
 //
 // Ownership: the writer keeps the addresses of the nodes it wrote, so the trees must stay
 // alive and unchanged while it is used; the reader holds a reference to every node it made
@@ -85,6 +85,9 @@ class BasicTreeGraphReader {
 
   // True when the last error was the stream running out.
   bool truncated() const noexcept { return truncated_; }
+  // Node records and landmarks read so far: the input's size, for a caller's work bounds.
+  std::uint64_t nodes_read() const noexcept { return made_.size(); }
+  std::uint64_t landmarks_read() const noexcept { return landmarks_read_; }
 
  private:
   using Node = typename Tree::Node;
@@ -107,6 +110,7 @@ class BasicTreeGraphReader {
   std::istream* in_;
   NodeHeap* heap_;
   std::vector<Made> made_;  // every node read, in id order, one reference each
+  std::uint64_t landmarks_read_ = 0;
   bool truncated_ = false;
 };
 

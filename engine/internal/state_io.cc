@@ -390,11 +390,17 @@ void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
   memory::ParticleStore& store = s.store;
   get_columns(in, store);
   // The maps, as the graph of nodes they shared when saved (memory/tree_graph.h). Each index is
-  // the previous particle's changed where the maps differ, so indices share as the maps do.
+  // the previous particle's changed where the maps differ, so indices share as the maps do: the
+  // engine keeps particles in ancestry order (resampling's ancestors come out sorted), so the
+  // previous particle is the nearest relative, and the changes add up to a few times the nodes
+  // read. That bound is enforced: a graph whose neighbouring maps differ by far more than the
+  // input holds (shared trees in an order no filter makes) is refused, not rebuilt at length.
   // With known ids every map holds exactly the K known slots: K landmarks, all below K.
   const bool known_ids = s.config.association == Association::kKnown;
   const std::size_t known_count = h.known_ids.size();
   memory::TreeGraphReader graph(in, s.heap);
+  std::uint64_t steps = 0;  // index work allowed and not yet used
+  std::uint64_t nodes_counted = 0, landmarks_counted = 0;
   try {
     for (std::size_t i = 0; i < store.size(); ++i) {
       memory::LandmarkTree map = graph.read([&](memory::Slot slot, const memory::Landmark& lm) {
@@ -407,10 +413,22 @@ void read_particles(std::istream& in, StateHeader&& h, FilterState& s) {
       if (known_ids && map.size() != known_count) {
         corrupt("map size of particle " + std::to_string(i));
       }
-      store.map(i) = i == 0 ? memory::ParticleMap(std::move(map), store.options().indexing,
-                                                  largest_variance)
-                            : memory::ParticleMap(std::move(map), store.map(i - 1),
-                                                  largest_variance);
+      steps += 64 + 64 * (graph.nodes_read() - nodes_counted) +
+               16 * (graph.landmarks_read() - landmarks_counted);
+      nodes_counted = graph.nodes_read();
+      landmarks_counted = graph.landmarks_read();
+      if (i == 0) {
+        store.map(i) = memory::ParticleMap(std::move(map), store.options().indexing,
+                                           largest_variance);
+      } else {
+        try {
+          store.map(i) =
+              memory::ParticleMap(std::move(map), store.map(i - 1), largest_variance, steps);
+        } catch (const std::length_error&) {
+          corrupt("the map of particle " + std::to_string(i) +
+                  " differs from its neighbour's by far more than the state's nodes hold");
+        }
+      }
     }
     graph.finish();
   } catch (const memory::TreeGraphError& e) {

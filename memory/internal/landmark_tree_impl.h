@@ -361,17 +361,23 @@ void BasicLandmarkTree<P>::prune(Slot slot) noexcept {
 
 template <class P>
 template <class Visit>
-void BasicLandmarkTree<P>::diff(const BasicLandmarkTree& other, Visit&& visit) const {
-  diff_nodes(root_, height_, other.root_, other.height_, 0, visit);
+bool BasicLandmarkTree<P>::diff(const BasicLandmarkTree& other, Visit&& visit,
+                                std::uint64_t& steps) const {
+  return diff_nodes(root_, height_, other.root_, other.height_, 0, visit, steps);
 }
 
 template <class P>
 template <class Visit>
-void BasicLandmarkTree<P>::diff_nodes(const Node* a, unsigned height_a, const Node* b,
-                                      unsigned height_b, std::uint64_t base, Visit& visit) {
+bool BasicLandmarkTree<P>::diff_nodes(const Node* a, unsigned height_a, const Node* b,
+                                      unsigned height_b, std::uint64_t base, Visit& visit,
+                                      std::uint64_t& steps) {
   if ((a == b && height_a == height_b) || (a == nullptr && b == nullptr)) {
-    return;  // shared, or both empty
+    return true;  // shared, or both empty
   }
+  if (steps == 0) {
+    return false;
+  }
+  --steps;
   if (height_a != height_b) {
     // The shorter tree's slots are the taller one's first child's (roots grow above child 0).
     const bool a_taller = height_a > height_b;
@@ -382,13 +388,11 @@ void BasicLandmarkTree<P>::diff_nodes(const Node* a, unsigned height_a, const No
       const Node* other = i == 0 ? (a_taller ? b : a) : nullptr;
       const unsigned other_height = i == 0 ? (a_taller ? height_b : height_a) : h - 1;
       const std::uint64_t at = base + i * capacity_at(h - 1);
-      if (a_taller) {
-        diff_nodes(child, h - 1, other, other_height, at, visit);
-      } else {
-        diff_nodes(other, other_height, child, h - 1, at, visit);
-      }
+      const bool done = a_taller ? diff_nodes(child, h - 1, other, other_height, at, visit, steps)
+                                 : diff_nodes(other, other_height, child, h - 1, at, visit, steps);
+      if (!done) return false;
     }
-    return;
+    return true;
   }
   if (height_a == 0) {
     const std::uint32_t in_a = a == nullptr ? 0 : a->aux;
@@ -400,13 +404,17 @@ void BasicLandmarkTree<P>::diff_nodes(const Node* a, unsigned height_a, const No
         visit(static_cast<Slot>(base + i), la, lb);
       }
     }
-    return;
+    return true;
   }
   for (unsigned i = 0; i < kInnerWidth; ++i) {
     const Node* ca = a == nullptr ? nullptr : static_cast<const Inner*>(a)->child[i];
     const Node* cb = b == nullptr ? nullptr : static_cast<const Inner*>(b)->child[i];
-    diff_nodes(ca, height_a - 1, cb, height_b - 1, base + i * capacity_at(height_a - 1), visit);
+    if (!diff_nodes(ca, height_a - 1, cb, height_b - 1, base + i * capacity_at(height_a - 1),
+                    visit, steps)) {
+      return false;
+    }
   }
+  return true;
 }
 
 template <class P>

@@ -146,6 +146,7 @@ void BasicTreeGraphReader<P>::read_leaf(Check& check) {
   std::memcpy(static_cast<void*>(leaf->landmarks), landmarks, sizeof(landmarks));
   leaf->aux = mask;
   made_.push_back({leaf, base, 0, static_cast<std::uint32_t>(std::popcount(mask))});
+  landmarks_read_ += static_cast<std::uint64_t>(std::popcount(mask));
 }
 
 template <class P>

@@ -274,8 +274,9 @@ TEST_P(ParticleMapTest, RebuiltBesideANearMapAnswersAsFromScratch) {
   scratch.clear();
   std::vector<ParticleMap> near;
   near.emplace_back(maps[0].tree(), GetParam(), extent_of);
+  std::uint64_t steps = ~std::uint64_t{0};
   for (std::size_t i = 1; i < maps.size(); ++i) {
-    near.emplace_back(maps[i].tree(), near[i - 1], extent_of);
+    near.emplace_back(maps[i].tree(), near[i - 1], extent_of, steps);
   }
   const std::int64_t near_nodes = heap_.stats().live_nodes - before;
   for (std::size_t i = 0; i < maps.size(); ++i) {
@@ -289,6 +290,11 @@ TEST_P(ParticleMapTest, RebuiltBesideANearMapAnswersAsFromScratch) {
   }
   if (GetParam() == Indexing::kSpatial) {
     EXPECT_LT(near_nodes * 4, scratch_nodes) << "near " << near_nodes << ", scratch " << scratch_nodes;
+    // A bounded rebuild stops once its steps run out (and frees what it made).
+    std::uint64_t few = 3;
+    const ParticleMap empty(heap_, GetParam());
+    EXPECT_THROW(ParticleMap(maps[0].tree(), empty, extent_of, few), std::length_error);
+    EXPECT_EQ(few, 0u);
   } else {
     EXPECT_EQ(near_nodes, 0);
   }

@@ -328,6 +328,35 @@ TEST(StateIoTest, MapsComeBackWithTheirNodesAndFarSlotsCostAPath) {
   }
 }
 
+// Two large maps alternating over the particles (an order no filter makes: resampling keeps
+// relatives next to each other) would cost a whole index per particle from a few bytes each;
+// the loader refuses it by name instead. The same maps in ancestry order load.
+TEST(StateIoTest, NeighboursThatShareNothingAreRefusedNotRebuiltAtLength) {
+  FilterConfig c;
+  c.particles = 400;
+  c.association = Association::kMaximumLikelihood;
+  FilterState s(c);
+  for (int k = 0; k < 2; ++k) {
+    for (std::uint64_t j = 0; j < 2000; ++j) {
+      const memory::Landmark l{static_cast<double>(j) + 0.5 * k, 1.0 * k, 0.1, 0.0, 0.2, 1.0, j,
+                               0};
+      s.store.map(static_cast<std::size_t>(k)).insert(l, largest_variance(l));
+    }
+  }
+  for (std::size_t i = 2; i < 400; ++i) s.store.map(i) = s.store.map(i % 2);
+  std::vector<TrajectoryPoint> unused;
+  try {
+    round_trip(save(s, {}), &unused);
+    ADD_FAILURE() << "alternating maps were rebuilt";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("differs from its neighbour's by far more"),
+              std::string::npos)
+        << e.what();
+  }
+  for (std::size_t i = 0; i < 400; ++i) s.store.map(i) = s.store.map(i < 200 ? 0 : 1);
+  EXPECT_NO_THROW(round_trip(save(s, {}), &unused));
+}
+
 // Known ids keep no index: a loaded state holds exactly the nodes the saved one did, after
 // maps that were copied and then changed apart (shared subtrees, not only shared roots).
 TEST(StateIoTest, KnownIdMapsLoadIntoTheSameNodes) {
