@@ -344,6 +344,7 @@ struct Setup {
 };
 
 Setup set_up(const SweepOptions& options, bool rank0) {
+  // A dry run creates nothing: the output directory is only read.
   const SweepRequest& request = options.request;
   if (request.out.empty()) throw std::runtime_error("fastslam sweep needs --out DIR");
   Setup s;
@@ -359,8 +360,10 @@ Setup set_up(const SweepOptions& options, bool rank0) {
   for (const SweepConfiguration& c : s.plan.configurations) {
     for (const std::string& path : run_inputs(c.options)) inputs.push_back(path);
   }
-  CreatedDir created(check_output_dir(request.out, inputs, kSweepFiles));
-  created.keep();
+  if (!options.dry_run) {
+    CreatedDir created(check_output_dir(request.out, inputs, kSweepFiles));
+    created.keep();
+  }
   for (const std::size_t i : largest_first(s.plan)) {
     if (std::optional<nlohmann::json> m = done_before(s.plan, i, request.out)) {
       s.done.emplace_back(i, std::move(*m));

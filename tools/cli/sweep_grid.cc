@@ -86,7 +86,8 @@ struct ParsedRun {
     try {
       app.parse(reversed);
     } catch (const CLI::ParseError& e) {
-      throw std::runtime_error(std::string("a `fastslam run` option: ") + e.what());
+      throw std::runtime_error(std::string("fastslam sweep takes `fastslam run`'s options: ") +
+                               e.what());
     }
   }
   bool given(const std::string& key) const {
