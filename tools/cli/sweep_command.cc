@@ -138,6 +138,11 @@ class Ranks {
   int size_ = 1;
 };
 
+// JSON text, with bytes that are not UTF-8 (a path in a warning) replaced rather than thrown on.
+std::string dump(const nlohmann::json& j, int indent = -1) {
+  return j.dump(indent, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 // Message tags between rank 0 and the others.
 enum Tag : int {
   kRequest = 1,  // a worker thread's result (JSON text; empty for its first request)
@@ -309,7 +314,7 @@ int write_results(const SweepOptions& options, const SweepPlan& plan, const Disp
       {"runs_resumed", resumed},
       {"configurations", configurations},
       {"runs", rows}};
-  write_file_atomically(out + "/sweep.json", sweep.dump(2) + '\n');
+  write_file_atomically(out + "/sweep.json", dump(sweep, 2) + '\n');
   std::vector<std::string> leading = {"configuration", "seed", "status"};
   for (const auto& [key, values] : plan.grid.items()) leading.push_back("axes." + key);
   write_rows_csv(out + "/sweep.csv", rows, leading);
@@ -349,12 +354,12 @@ Setup set_up(const SweepOptions& options, bool rank0) {
   if (request.out.empty()) throw std::runtime_error("fastslam sweep needs --out DIR");
   Setup s;
   s.plan = plan_sweep(request);
-  nlohmann::json identity = {{"config", s.plan.config_text},
+  const nlohmann::json identity = {{"config", s.plan.config_text},
                              {"arguments", request.run_args},
                              {"grid", request.grid},
                              {"out", request.out},
                              {"inputs", s.plan.inputs}};
-  s.digest = sha256_hex(identity.dump());
+  s.digest = sha256_hex(dump(identity));
   if (!rank0) return s;
   std::vector<std::string> inputs = {request.config};
   for (const SweepConfiguration& c : s.plan.configurations) {
@@ -440,7 +445,7 @@ void serve(Ranks& ranks, Dispenser& d, const std::atomic<unsigned>& local_runnin
 // waits for the sweep's exit code.
 int work(Ranks& ranks, const Setup& s, const std::string& out, unsigned jobs, unsigned threads) {
   const auto next = [&ranks](const nlohmann::json* result) -> long long {
-    const std::string text = result != nullptr ? result->dump() : std::string();
+    const std::string text = result != nullptr ? dump(*result) : std::string();
     const std::lock_guard lock(ranks.exchange_mutex);
     MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, 0, kRequest, MPI_COMM_WORLD);
     long long i = -1;
@@ -564,7 +569,13 @@ int run_sweep_command(const SweepOptions& options) {
             run_workers(jobs, s.plan, options.request.out, threads, next);
             running = 0;
           });
-          serve(ranks, d, running);
+          try {
+            serve(ranks, d, running);
+          } catch (const std::exception& e) {
+            // The other ranks wait on rank 0's answers: end them all rather than leave them.
+            std::fprintf(stderr, "fastslam: error: rank 0: %s; aborting every rank\n", e.what());
+            MPI_Abort(MPI_COMM_WORLD, 1);
+          }
           local.join();
 #endif
         }
