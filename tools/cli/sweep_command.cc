@@ -172,7 +172,9 @@ nlohmann::json execute(const SweepPlan& plan, std::size_t i, const std::string& 
 class Dispenser {
  public:
   Dispenser(const SweepPlan& plan, std::vector<std::size_t> pending, std::size_t done_before)
-      : plan_(plan), pending_(std::move(pending)), results_(plan.runs.size()),
+      : plan_(plan),
+        pending_(std::move(pending)),
+        results_(plan.runs.size()),
         finished_(done_before) {}
 
   // The next run to start, or -1 once none is left or the sweep is stopping.
@@ -193,8 +195,7 @@ class Dispenser {
     ++finished_;
     const std::string& name = plan_.configurations[r.configuration].name;
     std::printf("[%zu/%zu] %s%sseed %llu: %s", finished_, plan_.runs.size(), name.c_str(),
-                name.empty() ? "" : " ", static_cast<unsigned long long>(r.seed),
-                status.c_str());
+                name.empty() ? "" : " ", static_cast<unsigned long long>(r.seed), status.c_str());
     if (m.contains("pose_rmse_m") && m["pose_rmse_m"].is_number()) {
       std::printf(", pose_rmse_m %.4f", m["pose_rmse_m"].get<double>());
     }
@@ -203,8 +204,8 @@ class Dispenser {
     std::printf("\n");
     std::fflush(stdout);
     if (!failure.empty() && failure_.empty()) {
-      failure_ = (name.empty() ? "" : name + " ") + "seed " + std::to_string(r.seed) + ": " +
-                 failure;
+      failure_ =
+          (name.empty() ? "" : name + " ") + "seed " + std::to_string(r.seed) + ": " + failure;
       stop_ = true;
     }
     if (status == "interrupted") stop_ = true;
@@ -255,8 +256,8 @@ int write_results(const SweepOptions& options, const SweepPlan& plan, const Disp
   for (std::size_t i = 0; i < plan.runs.size(); ++i) {
     const SweepRun& r = plan.runs[i];
     const SweepConfiguration& c = plan.configurations[r.configuration];
-    nlohmann::json entry = d.results()[i] ? *d.results()[i]
-                                          : nlohmann::json{{"status", "not run"}, {"seed", r.seed}};
+    nlohmann::json entry =
+        d.results()[i] ? *d.results()[i] : nlohmann::json{{"status", "not run"}, {"seed", r.seed}};
     nlohmann::json provenance;
     take_provenance(entry, provenance);
     entry.erase("sweep_run");
@@ -324,10 +325,10 @@ int write_results(const SweepOptions& options, const SweepPlan& plan, const Disp
   for (std::size_t c = 0; c < plan.configurations.size(); ++c) {
     const nlohmann::json& s = configurations[c]["summary"];
     if (s.empty()) continue;
-    std::printf("-- %s: %zu runs, mean / median / worst (max) / stdev\n",
-                plan.configurations[c].name.empty() ? "(base)"
-                                                    : plan.configurations[c].name.c_str(),
-                complete[c].size());
+    std::printf(
+        "-- %s: %zu runs, mean / median / worst (max) / stdev\n",
+        plan.configurations[c].name.empty() ? "(base)" : plan.configurations[c].name.c_str(),
+        complete[c].size());
     print_headline(s);
   }
   std::printf("  wrote %s/{sweep.json,sweep.csv}\n", out.c_str());
@@ -349,23 +350,22 @@ struct Setup {
 };
 
 Setup set_up(const SweepOptions& options, bool rank0) {
-  // A dry run creates nothing: the output directory is only read.
   const SweepRequest& request = options.request;
   if (request.out.empty()) throw std::runtime_error("fastslam sweep needs --out DIR");
   Setup s;
   s.plan = plan_sweep(request);
   const nlohmann::json identity = {{"config", s.plan.config_text},
-                             {"arguments", request.run_args},
-                             {"grid", request.grid},
-                             {"out", request.out},
-                             {"inputs", s.plan.inputs}};
+                                   {"arguments", request.run_args},
+                                   {"grid", request.grid},
+                                   {"out", request.out},
+                                   {"inputs", s.plan.inputs}};
   s.digest = sha256_hex(dump(identity));
   if (!rank0) return s;
   std::vector<std::string> inputs = {request.config};
   for (const SweepConfiguration& c : s.plan.configurations) {
     for (const std::string& path : run_inputs(c.options)) inputs.push_back(path);
   }
-  if (!options.dry_run) {
+  if (!options.dry_run) {  // a dry run only reads the output directory
     CreatedDir created(check_output_dir(request.out, inputs, kSweepFiles));
     created.keep();
   }
@@ -381,8 +381,7 @@ Setup set_up(const SweepOptions& options, bool rank0) {
 
 void print_plan(const Setup& s) {
   std::printf("%zu configurations x %zu seeds = %zu runs; %zu done by an earlier sweep\n",
-              s.plan.configurations.size(), s.plan.seeds.size(), s.plan.runs.size(),
-              s.done.size());
+              s.plan.configurations.size(), s.plan.seeds.size(), s.plan.runs.size(), s.done.size());
   for (const std::size_t i : s.pending) {
     const SweepRun& r = s.plan.runs[i];
     std::printf("  %-40s cost %.3g\n", r.dir.c_str(), r.cost);
@@ -407,7 +406,7 @@ void run_workers(unsigned jobs, const SweepPlan& plan, const std::string& out, u
 }
 
 void pause_briefly(int& idle) {
-  // From 0.1 ms up to 5 ms while nothing comes: answers stay prompt, an idle rank sleeps.
+  // From 0.1 ms up to 3.2 ms while nothing comes: answers stay prompt, an idle rank sleeps.
   std::this_thread::sleep_for(std::chrono::microseconds(100 << std::min(idle, 5)));
   idle = std::min(idle + 1, 6);
 }
@@ -538,9 +537,9 @@ int run_sweep_command(const SweepOptions& options) {
   for (const SweepConfiguration& c : s.plan.configurations) {
     run_threads = std::max(run_threads, c.options.filter.threads);
   }
-  const unsigned jobs = options.jobs > 0 ? options.jobs
-                                         : std::max(1U, hardware / per_node /
-                                                            std::max(1U, run_threads));
+  const unsigned jobs = options.jobs > 0
+                            ? options.jobs
+                            : std::max(1U, hardware / per_node / std::max(1U, run_threads));
   const unsigned threads = std::max(1U, hardware / per_node / jobs);
 
   int code = 0;
@@ -549,9 +548,10 @@ int run_sweep_command(const SweepOptions& options) {
       if (options.dry_run) {
         print_plan(s);
       } else {
-        std::printf("== sweep: %zu runs (%zu done before), %d rank%s x %u jobs, %u threads per run\n",
-                    s.plan.runs.size(), s.done.size(), ranks.size(), ranks.size() > 1 ? "s" : "",
-                    jobs, threads);
+        std::printf(
+            "== sweep: %zu runs (%zu done before), %d rank%s x %u jobs, %u threads per run\n",
+            s.plan.runs.size(), s.done.size(), ranks.size(), ranks.size() > 1 ? "s" : "", jobs,
+            threads);
         std::fflush(stdout);
         Dispenser d(s.plan, s.pending, s.done.size());
         for (auto& [i, m] : s.done) d.set_result(i, std::move(m));

@@ -22,8 +22,8 @@ namespace {
 constexpr double kUnboundedSteps = 1e6;
 
 // Keys that name one file for one run, or the sweep's own output.
-const std::set<std::string> kOneRunKeys = {"out", "trace", "stream", "checkpoint", "resume",
-                                           "config"};
+const std::set<std::string> kOneRunKeys = {"out",        "trace",  "stream",
+                                           "checkpoint", "resume", "config"};
 
 // JSON with every key of every object given once: a repeated key would otherwise resolve
 // silently to its last value.
@@ -100,7 +100,8 @@ struct ParsedRun {
 void check_key(const CLI::App& probe, const std::string& where, const std::string& key) {
   const std::string head = where + ": key '" + key + "': ";
   if (key == "seed" || key == "seeds") {
-    throw std::runtime_error(head + "give the seeds as the file's top-level \"seeds\" (or --seeds)");
+    throw std::runtime_error(head +
+                             "give the seeds as the file's top-level \"seeds\" (or --seeds)");
   }
   if (kOneRunKeys.contains(key)) {
     throw std::runtime_error(head +
@@ -160,8 +161,7 @@ SweepPlan plan_sweep(const SweepRequest& request) {
     }
   }
   const ParsedRun probe(request.run_args);
-  for (const char* key : {"seed", "out", "trace", "stream", "checkpoint", "resume",
-                                 "config"}) {
+  for (const char* key : {"seed", "out", "trace", "stream", "checkpoint", "resume", "config"}) {
     if (probe.given(key)) {
       check_key(probe.app, "the command line", key);
     }
@@ -231,7 +231,7 @@ SweepPlan plan_sweep(const SweepRequest& request) {
       }
       sources.push_back(s);
     }
-    plan.grid["source"] = names.empty() ? nlohmann::json::array() : nlohmann::json::array();
+    plan.grid["source"] = nlohmann::json::array();
     for (const nlohmann::json& s : sources) plan.grid["source"].push_back(s["name"]);
   }
   for (const auto& [key, values] : grid.items()) plan.grid[key] = values;
@@ -249,7 +249,8 @@ SweepPlan plan_sweep(const SweepRequest& request) {
   // fastest.
   std::vector<std::string> keys;
   std::vector<std::size_t> sizes;
-  for (const auto& [key, values] : grid.items()) keys.push_back(key), sizes.push_back(values.size());
+  for (const auto& [key, values] : grid.items())
+    keys.push_back(key), sizes.push_back(values.size());
   const std::size_t n_sources = std::max<std::size_t>(1, sources.size());
   std::size_t product = 1;
   for (std::size_t s : sizes) product *= s;
@@ -355,8 +356,8 @@ RunOptions run_options(const SweepPlan& plan, std::size_t i, const std::string& 
   RunOptions o = c.options;
   o.filter.seed = r.seed;
   o.out = out + "/" + r.dir;
-  o.sweep_run = nlohmann::json{{"configuration", c.name}, {"seed", r.seed}, {"identity", r.identity}}
-                    .dump();
+  o.sweep_run =
+      nlohmann::json{{"configuration", c.name}, {"seed", r.seed}, {"identity", r.identity}}.dump();
   return o;
 }
 

@@ -60,7 +60,7 @@ struct SweepRun {
 struct SweepPlan {
   std::string config_text;  // the file's bytes (empty without --config)
   std::vector<std::uint64_t> seeds;
-  nlohmann::json grid;     // the axes as expanded: {"source": [...], KEY: [...]}
+  nlohmann::json grid;  // the axes as expanded: {"source": [...], KEY: [...]}
   std::vector<SweepConfiguration> configurations;
   std::vector<SweepRun> runs;  // configuration-major, seeds in the order given
   nlohmann::json inputs;       // every configuration's inputs, each file once

@@ -32,7 +32,9 @@ class SweepFile {
 SweepPlan plan(const std::string& text, std::vector<std::string> args = {},
                std::vector<std::string> grid = {}) {
   const SweepFile file(text);
-  return plan_sweep({.config = file.path(), .out = file.dir() + "/out", .grid = std::move(grid),
+  return plan_sweep({.config = file.path(),
+                     .out = file.dir() + "/out",
+                     .grid = std::move(grid),
                      .run_args = std::move(args)});
 }
 
@@ -82,7 +84,8 @@ TEST(PlanSweep, LargestFirst) {
 // No axes: one configuration run into OUT/seed-S; the command line's flags win over "base";
 // --grid replaces the file's axis; --seeds the file's seeds.
 TEST(PlanSweep, CommandLineFlags) {
-  const SweepPlan one = plan(R"({"base": {"particles": 7, "world": "loop"}})", {"--particles", "9"});
+  const SweepPlan one =
+      plan(R"({"base": {"particles": 7, "world": "loop"}})", {"--particles", "9"});
   ASSERT_EQ(one.runs.size(), 1u);
   EXPECT_EQ(one.runs[0].dir, "seed-1");
   EXPECT_EQ(one.configurations[0].options.filter.particles, 9u);
@@ -135,7 +138,8 @@ TEST(PlanSweep, RefusesBadGridsNamingTheKey) {
        "(configuration particles-0): key 'particles': --particles"},
       {R"({"sources": []})", "key 'sources': empty axis"},
       {R"({"sources": [{"world": "loop"}]})", "sources[0]: key 'name'"},
-      {R"({"sources": [{"name": "a"}, {"name": "a"}]})", "sources[1]: key 'name': 'a' is given twice"},
+      {R"({"sources": [{"name": "a"}, {"name": "a"}]})",
+       "sources[1]: key 'name': 'a' is given twice"},
       {R"({"base": {"world": "loop"}, "sources": [{"name": "a", "world": "grid"}]})",
        "sources[0]: key 'world' is also in base"},
       {R"({"grid": {"data": ["a b", "a_b"]}})", "get the same directory name"},
