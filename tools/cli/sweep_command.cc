@@ -116,7 +116,9 @@ class Ranks {
   std::vector<std::string> gather(const std::string& text, std::size_t width) const {
     std::vector<std::string> out;
     if (!mpi_) return {text};
-#ifdef FASTSLAM_HAVE_MPI
+#ifndef FASTSLAM_HAVE_MPI
+    (void)width;
+#else
     std::string padded = text;
     padded.resize(width, ' ');
     std::string all(rank_ == 0 ? width * static_cast<std::size_t>(size_) : 0, ' ');
