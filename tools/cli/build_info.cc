@@ -21,6 +21,14 @@ constexpr const char* kCompiledSimd =
     "none";
 #endif
 
+// Whether `fastslam sweep` can spread its runs over MPI ranks (tools/cli/sweep_command.h).
+constexpr const char* kMpi =
+#ifdef FASTSLAM_HAVE_MPI
+    "yes (fastslam sweep under mpirun spreads its runs over the ranks)";
+#else
+    "no (fastslam sweep runs on local threads only)";
+#endif
+
 }  // namespace
 
 BuildInfo build_info() {
@@ -40,7 +48,7 @@ std::string version_text() {
          "\ncompiler " + b.compiler + "\nsimd " + b.simd +
          " (random-stream kernels; FASTSLAM_ISA=baseline|avx2|avx512 forces one in a portable "
          "build), compiled for " +
-         b.compiled_simd;
+         b.compiled_simd + "\nmpi " + kMpi;
 }
 
 nlohmann::json build_info_json() {

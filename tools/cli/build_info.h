@@ -28,7 +28,7 @@ struct BuildInfo {
 
 BuildInfo build_info();
 
-// The text `fastslam --version` prints: a line per fact.
+// The text `fastslam --version` prints: a line per fact, the last whether the build has MPI.
 std::string version_text();
 
 // {"version", "commit", "dirty", "build_type", "compiler", "simd", "compiled_simd"}.

@@ -1,4 +1,5 @@
-// The `fastslam` command line: `run` and `convert` (tools/cli/command_line.h), `bench scaling`
+// The `fastslam` command line: `run` and `convert` (tools/cli/command_line.h), `sweep`
+// (tools/cli/sweep_command.h), `bench scaling`
 // (tools/studies/scaling_study.h) and `experiment lg-slam` (tools/studies/lg_slam_experiment.h).
 #include <cstddef>
 #include <cstdint>
@@ -15,6 +16,7 @@
 #include "tools/cli/command_line.h"
 #include "tools/cli/run_command.h"
 #include "tools/cli/run_sweep.h"
+#include "tools/cli/sweep_command.h"
 #include "tools/studies/lg_slam_experiment.h"
 #include "tools/studies/scaling_study.h"
 
@@ -122,6 +124,35 @@ CLI::App* add_lg_slam_command(CLI::App& experiment, LgSlamExperimentOptions& lg)
   return cmd;
 }
 
+// `fastslam sweep`: its own options; every other argument is a `fastslam run` option, the
+// base of every run (parsed per configuration by tools/cli/sweep_grid.h).
+CLI::App* add_sweep_command(CLI::App& app, SweepOptions& s) {
+  CLI::App* cmd = app.add_subcommand(
+      "sweep",
+      "run a grid of seeds x options x sources (a JSON file, --grid flags), each as `fastslam "
+      "run` into OUT/NAME/seed-S, over --jobs local threads or, under mpirun, over MPI ranks; "
+      "writes OUT/sweep.json (a summary per configuration) and OUT/sweep.csv (a row per run); "
+      "a rerun skips the runs already complete. Any `fastslam run` option (e.g. --seeds 1-10 "
+      "--max-steps 500) is the base of every run");
+  cmd->add_option("--config", s.request.config,
+                  "the sweep file: {\"base\": {run options}, \"seeds\": \"1-10\", \"grid\": "
+                  "{\"particles\": [100, 1000]}, \"sources\": [{\"name\": ..., run options}]}")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--out", s.request.out, "the sweep's directory")->required();
+  cmd->add_option("--grid", s.request.grid,
+                  "an axis KEY=V1,V2,... (repeatable), replacing the file's grid KEY");
+  cmd->add_option("--jobs", s.jobs,
+                  "runs at once in each process (default 0: the cores of this node divided by "
+                  "its ranks and each run's --threads); each run then gets cores / jobs threads "
+                  "unless --threads says")
+      ->check(CLI::Range(0U, 4096U))
+      ->capture_default_str();
+  cmd->add_flag("--dry-run", s.dry_run,
+                "print the runs in the order they would start, and which are already done");
+  cmd->allow_extras();
+  return cmd;
+}
+
 }  // namespace
 }  // namespace fastslam::tools
 
@@ -148,6 +179,9 @@ int main(int argc, char** argv) {
       "convert", "write any source (a simulated world, a data set) as a native log file");
   tools::add_convert_options(*convert_cmd, convert, convert_words);
 
+  tools::SweepOptions sweep;
+  CLI::App* sweep_cmd = tools::add_sweep_command(app, sweep);
+
   CLI::App* bench_cmd = app.add_subcommand("bench", "throughput studies");
   bench_cmd->require_subcommand(1);
   tools::ScalingCommand scaling;
@@ -164,6 +198,10 @@ int main(int argc, char** argv) {
       if (!words.config.empty()) tools::apply_json_config(*run_cmd, words.config);
       tools::finish_run_options(*run_cmd, words, run);
       return run.seeds.empty() ? tools::run_simulation(run) : tools::run_sweep(run);
+    }
+    if (sweep_cmd->parsed()) {
+      sweep.request.run_args = sweep_cmd->remaining();
+      return tools::run_sweep_command(sweep);
     }
     if (convert_cmd->parsed()) {
       if (!convert_words.config.empty())

@@ -787,6 +787,7 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
   metrics["options"] = resolved_options_json(resolved, config, association.mode);
   metrics["memory_estimate_bytes"] = memory.bytes;
   if (options.hash_inputs) metrics["inputs"] = inputs;
+  if (!options.sweep_run.empty()) metrics["sweep_run"] = nlohmann::json::parse(options.sweep_run);
   // With the scans streamed to standard output, everything else goes to standard error.
   std::FILE* const text = options.stream == "-" ? stderr : stdout;
   if (!options.quiet) print_summary(settings, r, text);

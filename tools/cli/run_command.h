@@ -146,6 +146,10 @@ struct RunOptions {
   // metrics.json's "inputs": the SHA-256 of each input file (tools/cli/run_provenance.h). A
   // sweep hashes once for all its seeds and turns this off for each run.
   bool hash_inputs = true;
+  // Set by `fastslam sweep` (tools/cli/sweep_command.h): a JSON object's text written to
+  // metrics.json as "sweep_run" (the run's place in the sweep and its identity), by which a
+  // rerun of the sweep knows the run is done. Empty: none.
+  std::string sweep_run;
 };
 
 // The plot script `fastslam run` uses by default: $FASTSLAM_PLOT_SCRIPT when set, else this

@@ -112,6 +112,69 @@ nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed) {
   return summary;
 }
 
+nlohmann::json run_entry(const RunOptions& o, const std::function<void()>& accepted,
+                         std::string& failure) {
+  try {
+    return run_once(o, accepted);
+  } catch (const RunFailed& e) {
+    failure = e.what();
+    return e.metrics();
+  }
+}
+
+void take_provenance(nlohmann::json& entry, nlohmann::json& provenance) {
+  for (const char* key : {"schema_version", "build", "options", "inputs"}) {
+    if (!entry.contains(key)) continue;
+    if (!provenance.contains(key)) provenance[key] = entry[key];
+    entry.erase(key);
+  }
+}
+
+void write_rows_csv(const std::string& path, const std::vector<nlohmann::json>& rows,
+                    const std::vector<std::string>& leading) {
+  std::vector<std::map<std::string, nlohmann::json>> flat(rows.size());
+  std::set<std::string> rest;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    flatten(rows[i], "", flat[i]);
+    for (const auto& [key, value] : flat[i]) rest.insert(key);
+  }
+  // Strings too for the leading columns (a configuration's name, a source).
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    for (const std::string& c : leading) {
+      if (rows[i].contains(c) && rows[i][c].is_string()) flat[i][c] = rows[i][c];
+    }
+  }
+  std::vector<std::string> columns = leading;
+  for (const std::string& c : rest) {
+    if (std::find(leading.begin(), leading.end(), c) == leading.end()) columns.push_back(c);
+  }
+  AtomicFile file(path);
+  std::ostream& csv = file.stream();
+  bool first = true;
+  for (const std::string& c : columns) csv << (first ? "" : ",") << c, first = false;
+  csv << '\n';
+  for (const auto& row : flat) {
+    first = true;
+    for (const std::string& c : columns) {
+      csv << (first ? "" : ",");
+      first = false;
+      const auto found = row.find(c);
+      if (found != row.end()) csv << found->second.dump();
+    }
+    csv << '\n';
+  }
+  file.commit();
+}
+
+void print_headline(const nlohmann::json& summary) {
+  for (const char* key : kHeadline) {
+    if (!summary.contains(key)) continue;
+    const nlohmann::json& s = summary[key];
+    std::printf("  %-28s %10.3f / %10.3f / %10.3f / %8.3f\n", key, s["mean"].get<double>(),
+                s["median"].get<double>(), s["max"].get<double>(), s["stdev"].get<double>());
+  }
+}
+
 int run_sweep(const RunOptions& options) {
   const std::vector<std::uint64_t>& seeds = options.seeds;
   if (seeds.empty()) throw std::invalid_argument("--seeds: no seed given");
@@ -145,24 +208,19 @@ int run_sweep(const RunOptions& options) {
     std::fflush(stdout);
     nlohmann::json m;
     try {
-      m = run_once(o, on_accepted);
+      m = run_entry(o, on_accepted, failure);
+      if (!failure.empty()) failure = "seed " + std::to_string(seed) + ": " + failure;
     } catch (const std::exception& e) {
       // Before the sweep started, a refusal: nothing to summarise.
       if (!accepted) throw;
       failure = "seed " + std::to_string(seed) + ": " + e.what();
-      const auto* failed = dynamic_cast<const RunFailed*>(&e);
-      m = failed != nullptr ? failed->metrics()
-                            : nlohmann::json{{"status", std::string("failed: ") + e.what()}};
+      m = nlohmann::json{{"status", std::string("failed: ") + e.what()}};
     }
     per_seed.push_back(std::move(m));
     nlohmann::json& entry = per_seed.back();
     const bool interrupted = entry["status"] == "interrupted";
     entry["seed"] = seed;
-    for (const char* key : {"schema_version", "build", "options"}) {
-      if (!entry.contains(key)) continue;
-      if (!provenance.contains(key)) provenance[key] = entry[key];
-      entry.erase(key);
-    }
+    take_provenance(entry, provenance);
     // The seeds run so far are summarised; the rest are not started.
     if (interrupted || !failure.empty()) break;
   }
@@ -177,12 +235,7 @@ int run_sweep(const RunOptions& options) {
   }
   const nlohmann::json summary = summarise_seeds(finished);
   std::printf("== %zu seeds: mean / median / worst (max) / stdev\n", seeds.size());
-  for (const char* key : kHeadline) {
-    if (!summary.contains(key)) continue;
-    const nlohmann::json& s = summary[key];
-    std::printf("  %-28s %10.3f / %10.3f / %10.3f / %8.3f\n", key, s["mean"].get<double>(),
-                s["median"].get<double>(), s["max"].get<double>(), s["stdev"].get<double>());
-  }
+  print_headline(summary);
   const int code = signal != 0 ? 128 + signal : 0;
   if (options.out.empty()) {
     if (!failure.empty()) throw std::runtime_error(failure);
@@ -198,28 +251,7 @@ int run_sweep(const RunOptions& options) {
     sweep["per_seed"] = per_seed;
     write_file_atomically(options.out + "/sweep.json", sweep.dump(2) + '\n');
   }
-  std::set<std::string> columns;
-  std::vector<std::map<std::string, nlohmann::json>> rows(per_seed.size());
-  for (std::size_t i = 0; i < per_seed.size(); ++i) {
-    flatten(per_seed[i], "", rows[i]);
-    for (const auto& [key, value] : rows[i]) columns.insert(key);
-  }
-  AtomicFile file(options.out + "/sweep.csv");
-  std::ostream& csv = file.stream();
-  bool first = true;
-  for (const std::string& c : columns) csv << (first ? "" : ",") << c, first = false;
-  csv << '\n';
-  for (const auto& row : rows) {
-    first = true;
-    for (const std::string& c : columns) {
-      csv << (first ? "" : ",");
-      first = false;
-      const auto found = row.find(c);
-      if (found != row.end()) csv << found->second.dump();
-    }
-    csv << '\n';
-  }
-  file.commit();
+  write_rows_csv(options.out + "/sweep.csv", per_seed);
   std::printf("  wrote %s/{sweep.json,sweep.csv,seed-*/}\n", options.out.c_str());
   if (!failure.empty()) {
     throw std::runtime_error(failure + "; the seeds up to it are in " + options.out +

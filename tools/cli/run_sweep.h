@@ -18,6 +18,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,26 @@ std::vector<std::uint64_t> parse_seeds(const std::string& text);
 // The summary of metrics.json objects, one per seed: {key: {mean, median, min, max, stdev}}
 // for every number (nested objects as "outer.inner"), {key: {true: count}} for booleans.
 nlohmann::json summarise_seeds(const std::vector<nlohmann::json>& per_seed);
+
+// One run of a sweep, the per-run code `fastslam run --seeds` and `fastslam sweep`
+// (tools/cli/sweep_command.h) share: run_once(o, accepted)'s metrics, or for a run that failed
+// after it started (RunFailed) its metrics with "status": "failed: ..." and the message in
+// `failure`. A refusal before the run started propagates.
+nlohmann::json run_entry(const RunOptions& o, const std::function<void()>& accepted,
+                         std::string& failure);
+
+// Moves what every run of a sweep repeats ("schema_version", "build", "options", "inputs") out
+// of a run's metrics `entry` into `provenance`, keeping the first run's values there.
+void take_provenance(nlohmann::json& entry, nlohmann::json& provenance);
+
+// Writes `rows` (metrics objects, nested objects flattened as "outer.inner") as CSV to `path`
+// atomically: `leading` columns first, then every other key in name order; an absent value is
+// left empty. Throws std::runtime_error naming the file when it cannot be written.
+void write_rows_csv(const std::string& path, const std::vector<nlohmann::json>& rows,
+                    const std::vector<std::string>& leading = {});
+
+// Prints summarise_seeds' headline errors (mean / median / worst / stdev) to stdout.
+void print_headline(const nlohmann::json& summary);
 
 // Runs `options` once per seed of options.seeds; returns the process exit code (128 + the
 // signal when interrupted). Throws std::exception for a sweep refused before its first seed

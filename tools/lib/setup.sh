@@ -1,7 +1,8 @@
 # Shared by tools/run.sh and tools/test.sh (sourced, not run): installs the Debian packages the
 # build needs when any is missing (apt-get as root, sudo otherwise; nothing when all are there;
-# clang-14 and libclang-rt-14-dev are the fuzz preset's compiler and libFuzzer), and sets up
-# ccache so rebuilds, including CI's fresh clones, reuse earlier compilations.
+# clang-14 and libclang-rt-14-dev are the fuzz preset's compiler and libFuzzer; Open MPI is
+# `fastslam sweep`'s optional spreading of runs over ranks), and sets up ccache so rebuilds,
+# including CI's fresh clones, reuse earlier compilations.
 
 FASTSLAM_PACKAGES=(
   cmake ninja-build g++ pkg-config ccache git qemu-user
@@ -11,6 +12,7 @@ FASTSLAM_PACKAGES=(
   python3 python3-numpy python3-matplotlib
   python3-dev pybind11-dev python3-pytest
   clang-14 libclang-rt-14-dev
+  libopenmpi-dev openmpi-bin
 )
 
 fastslam_install_packages() {
