@@ -4,8 +4,9 @@
 //
 // Ownership: owns its file stream. Thread safety: thread-compatible.
 // Costs: O(bytes read), read in blocks of 4 KiB growing to 64 KiB (a small file costs a small
-// buffer) and split into lines with memchr; no allocation per row. A line is held to kMaxLogLineBytes (tools/io/log_format.h): a longer one (a file
-// with no newline) is refused, not read whole.
+// buffer) and split into lines with memchr; no allocation per row. A line is held to
+// kMaxLogLineBytes (tools/io/log_format.h): a longer one (a file with no newline) is refused, not
+// read whole.
 #pragma once
 
 #include <cstddef>
