@@ -3,13 +3,15 @@
 // that is not a number, a non-finite value, a header that is not the expected one.
 //
 // Ownership: owns its file stream. Thread safety: thread-compatible.
-// Costs: O(bytes read), read 64 KiB at a time and split into lines with memchr; no allocation
-// per row. A line is held to kMaxLogLineBytes (tools/io/log_format.h): a longer one (a file
-// with no newline) is refused, not read whole.
+// Costs: O(bytes read), read in blocks of 4 KiB growing to 64 KiB (a small file costs a small
+// buffer) and split into lines with memchr; no allocation per row. A line is held to
+// kMaxLogLineBytes (tools/io/log_format.h): a longer one (a file with no newline) is refused, not
+// read whole.
 #pragma once
 
 #include <cstddef>
 #include <fstream>
+#include <memory>
 #include <span>
 #include <string>
 #include <string_view>
@@ -42,7 +44,8 @@ class CsvReader {
   std::string path_;
   std::vector<std::string> columns_;
   std::ifstream in_;
-  std::string block_;                     // read ahead of the lines
+  std::unique_ptr<char[]> block_;         // read ahead of the lines, uninitialised
+  std::size_t block_size_ = 0;            // its capacity
   std::size_t next_ = 0, end_ = 0;        // block_'s unread bytes
   std::string text_;                      // the current line
   std::vector<std::string_view> fields_;  // its fields

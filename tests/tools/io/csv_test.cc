@@ -51,6 +51,30 @@ TEST_F(CsvTest, ReadsRowsAndSkipsBlankLines) {
   EXPECT_FALSE(reader.next(row));
 }
 
+// The reader's blocks grow from 4 KiB to 64 KiB; rows cut by every block edge on the way (and
+// by several 64 KiB ones) read whole, with their line numbers.
+TEST_F(CsvTest, ReadsRowsAcrossGrowingBlocks) {
+  std::string text = "id,x_m,y_m\n";
+  constexpr int kRows = 20000;  // about 400 KiB
+  for (int i = 0; i < kRows; ++i) {
+    text += std::to_string(i) + ",0.125," + std::to_string(i * 3) + ".5\n";
+  }
+  text += "bad,1,2\n";
+  const std::string path = write(text);
+  CsvReader reader(path, {"id", "x_m", "y_m"});
+  std::array<double, 3> row{};
+  for (int i = 0; i < kRows; ++i) {
+    ASSERT_TRUE(reader.next(row)) << i;
+    ASSERT_EQ(row, (std::array<double, 3>{double(i), 0.125, i * 3 + 0.5})) << i;
+  }
+  try {
+    reader.next(row);
+    FAIL() << "the last row is not a number";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()).substr(0, path.size() + 7), path + ":20002:");
+  }
+}
+
 // A line is held to the log reader's limit, so a file with no newline is refused, not read
 // whole into memory.
 TEST_F(CsvTest, RefusesALineLongerThanTheLimit) {
