@@ -200,6 +200,9 @@ TYPED_TEST(NodeHeapTest, StatsAreReadableWhileOtherThreadsAllocateAndFree) {
   });
   for (int p = 0; p < kProducers; ++p) {
     threads.emplace_back([&] {
+      // The reader has read once before any block moves, so the test sees readings however
+      // the threads are scheduled (a loaded machine once ran the producers first).
+      while (readings.load() == 0) std::this_thread::yield();
       for (int i = 0; i < per_producer; ++i) {
         void* block = heap.allocate(64);
         std::lock_guard lock(mutex);
