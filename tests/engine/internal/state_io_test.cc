@@ -54,6 +54,15 @@ void fill(FilterState& s) {
   }
 }
 
+// The state `bytes` holds, read back.
+std::unique_ptr<FilterState> load_state(const std::string& bytes) {
+  std::istringstream in(bytes);
+  StateHeader header = read_header(in);
+  auto state = std::make_unique<FilterState>(header.config);
+  read_particles(in, std::move(header), *state);
+  return state;
+}
+
 std::string round_trip(const std::string& bytes, std::vector<TrajectoryPoint>* trajectory) {
   std::istringstream in(bytes);
   StateHeader header = read_header(in);
@@ -88,10 +97,8 @@ TEST(StateIoTest, IndexIsRebuiltFromTheMap) {
   c.association = Association::kDataAssociationSampling;
   FilterState s(c);
   fill(s);
-  std::istringstream in(save(s, {}));
-  StateHeader header = read_header(in);
-  FilterState loaded(header.config);
-  read_particles(in, std::move(header), loaded);
+  const std::unique_ptr<FilterState> read = load_state(save(s, {}));
+  const FilterState& loaded = *read;
   for (std::size_t i = 0; i < 4; ++i) {
     std::size_t entries = 0;
     loaded.store.map(i).index().within(0, 0, 1e9, [&](const memory::SpatialEntry& e) {
@@ -292,10 +299,8 @@ TEST(StateIoTest, MapsComeBackWithTheirNodesAndFarSlotsCostAPath) {
   s.store.map(0) = memory::ParticleMap(std::move(tree), memory::Indexing::kSpatial,
                                        largest_variance);
   const std::string good = save(s, {});
-  std::istringstream in(good);
-  StateHeader header = read_header(in);
-  FilterState loaded(header.config);
-  read_particles(in, std::move(header), loaded);
+  const std::unique_ptr<FilterState> read = load_state(good);
+  const FilterState& loaded = *read;
   ASSERT_EQ(loaded.store.map(0).size(), 6u);
   EXPECT_EQ(*loaded.store.map(0).find(kFar), far);
   for (std::size_t i = 1; i < 4; ++i) {
@@ -370,10 +375,8 @@ TEST(StateIoTest, KnownIdMapsLoadIntoTheSameNodes) {
     s.store.map(i).edit_unindexed(static_cast<memory::Slot>(i % 6)).x += 0.25 * i;
   }
   const std::string bytes = save(s, {});
-  std::istringstream in(bytes);
-  StateHeader header = read_header(in);
-  FilterState loaded(header.config);
-  read_particles(in, std::move(header), loaded);
+  const std::unique_ptr<FilterState> read = load_state(bytes);
+  const FilterState& loaded = *read;
   EXPECT_EQ(loaded.heap.stats().live_nodes, s.heap.stats().live_nodes);
   EXPECT_EQ(loaded.heap.stats().live_bytes, s.heap.stats().live_bytes);
   EXPECT_EQ(save(loaded, {}), bytes);
