@@ -18,6 +18,7 @@
 #include "engine/internal/pass.h"
 #include "engine/internal/resample_stage.h"
 #include "engine/internal/scan_plan.h"
+#include "engine/internal/shared_set.h"
 #include "engine/internal/state_io.h"
 #include "engine/internal/trajectory_recorder.h"
 #include "memory/node_heap.h"
@@ -26,10 +27,12 @@
 namespace fastslam::engine {
 
 struct Filter::Impl {
-  explicit Impl(const FilterConfig& c)
-      : kernel({checked(c).threads, c.grain}),
-        state(c),
+  explicit Impl(const FilterConfig& c, std::shared_ptr<parallel::Collective> g = nullptr)
+      : group(std::move(g)),
+        kernel({checked(c).threads, c.grain}),
+        state(c, group.get()),
         resample(c, kernel),
+        recorder(group.get()),
         pass(internal::make_pass(state, kernel, recorder)) {}
 
   static const FilterConfig& checked(const FilterConfig& c) {
@@ -48,6 +51,7 @@ struct Filter::Impl {
 
   // Members in order of construction; the pass (and its background task) is destroyed first,
   // the kernel last.
+  std::shared_ptr<parallel::Collective> group;  // nullptr: this process holds the whole set
   parallel::ParticleKernel kernel;
   internal::FilterState state;
   internal::ResampleStage resample;
@@ -56,6 +60,16 @@ struct Filter::Impl {
 };
 
 Filter::Filter(const FilterConfig& config) : impl_(std::make_unique<Impl>(config)) {}
+Filter::Filter(const FilterConfig& config, std::shared_ptr<parallel::Collective> group)
+    : impl_(std::make_unique<Impl>(config, [&] {
+        if (group == nullptr) throw std::invalid_argument("Filter: the group is null");
+        if (config.resample.scheme == parallel::ResampleScheme::kMultinomial) {
+          throw std::invalid_argument(
+              "Filter: multinomial resampling is not available over ranks (its pointers are a "
+              "scan over every rank's spacings); use systematic or stratified");
+        }
+        return std::move(group);
+      }())) {}
 Filter::Filter(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Filter::~Filter() = default;
 
@@ -138,8 +152,14 @@ void Filter::observe(std::span<const Observation> scan) {
   const std::uint64_t scan_step = s.counters.step;
   s.records.reset(s.store.size(), plan.observations.size());
   impl.pass->observe(plan.observations, scan_step);
-  s.associations = internal::report_scan(s.store, s.records, plan.observations,
-                                         s.config.association == Association::kKnown, scan_step);
+  const internal::BestParticle best = internal::best_particle(s);
+  std::vector<ObservationAssociation> report;
+  if (best.here) {
+    report = internal::report_scan(s.store, best.local, s.records, plan.observations,
+                                   s.config.association == Association::kKnown, scan_step);
+  }
+  s.associations =
+      s.group == nullptr ? std::move(report) : internal::broadcast(*s.group, best.owner, report);
   s.known_slots.merge(plan.new_slots);
   ++s.counters.step;
   ++s.counters.scans;
@@ -168,21 +188,20 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
 
 Estimate Filter::estimate(EstimateMap map_part) {
   impl_->drain();
-  const memory::ParticleStore& store = impl_->state.store;
+  const internal::FilterState& s = impl_->state;
+  parallel::Collective* const group = s.group;
+  const memory::ParticleStore& store = s.store;
   const std::size_t m = store.size();
   Estimate e;
   std::span<const double> lw = store.log_weight();
-  std::size_t best = 0;
-  for (std::size_t i = 1; i < m; ++i) {
-    if (lw[i] > lw[best]) best = i;
-  }
-  const double max_lw = lw[best];
+  const internal::BestParticle best = internal::best_particle(s);
+  const double max_lw = best.log_weight;
   // Weighted sums over fixed blocks, folded in order: deterministic for any thread count.
   struct Sums {
     double w = 0, w2 = 0, x = 0, y = 0, c = 0, sn = 0, v = 0, omega = 0;
   };
-  const Sums sums = impl_->kernel.reduce(
-      m, Sums{},
+  const Sums sums = parallel::shared_reduce(
+      impl_->kernel, group, m, Sums{},
       [&](std::size_t begin, std::size_t end) {
         Sums part;
         for (std::size_t i = begin; i < end; ++i) {
@@ -210,8 +229,8 @@ Estimate Filter::estimate(EstimateMap map_part) {
   e.effective_sample_size = sums.w * sums.w / sums.w2;
   // The covariance about the mean, a second pass (no cancellation of large sums).
   using Moments = std::array<double, 6>;  // xx, xy, xt, yy, yt, tt
-  const Moments mo = impl_->kernel.reduce(
-      m, Moments{},
+  const Moments mo = parallel::shared_reduce(
+      impl_->kernel, group, m, Moments{},
       [&](std::size_t begin, std::size_t end) {
         Moments part{};
         for (std::size_t i = begin; i < end; ++i) {
@@ -236,20 +255,33 @@ Estimate Filter::estimate(EstimateMap map_part) {
   }
   e.time = impl_->state.time;
   e.associations = impl_->state.associations;
-  e.best_particle = static_cast<std::uint32_t>(best);
-  const double best_pose[5] = {store.x()[best], store.y()[best], store.theta()[best],
-                               store.v()[best], store.omega()[best]};
-  std::copy(std::begin(best_pose), std::end(best_pose), e.best_pose);
-  const memory::LandmarkTree& map = store.map(best).tree();
-  e.map_size = map.size();
-  if (map_part == EstimateMap::kSizeOnly) return e;
-  e.map.reserve(map.size());
-  const bool known_ids = impl_->state.config.association == Association::kKnown;
-  const double confirm_at = impl_->state.config.existence.confirm_at;
-  for (const auto [slot, lm] : map) {
-    if (!known_ids && !(lm.log_odds >= confirm_at)) continue;
-    e.map.push_back({slot, lm.id, lm.x, lm.y, lm.sxx, lm.sxy, lm.syy, lm.log_odds, lm.last_seen});
+  e.best_particle = static_cast<std::uint32_t>(best.index);
+  // The best particle's pose, map size and map, from the rank holding it.
+  std::vector<double> pose;
+  std::vector<MapLandmark> landmarks;
+  if (best.here) {
+    const std::size_t b = best.local;
+    pose = {store.x()[b], store.y()[b], store.theta()[b], store.v()[b], store.omega()[b]};
+    const memory::LandmarkTree& map = store.map(b).tree();
+    pose.push_back(static_cast<double>(map.size()));
+    if (map_part == EstimateMap::kCopy) {
+      landmarks.reserve(map.size());
+      const bool known_ids = s.config.association == Association::kKnown;
+      const double confirm_at = s.config.existence.confirm_at;
+      for (const auto [slot, lm] : map) {
+        if (!known_ids && !(lm.log_odds >= confirm_at)) continue;
+        landmarks.push_back(
+            {slot, lm.id, lm.x, lm.y, lm.sxx, lm.sxy, lm.syy, lm.log_odds, lm.last_seen});
+      }
+    }
   }
+  if (group != nullptr) {
+    pose = internal::broadcast(*group, best.owner, pose);
+    if (map_part == EstimateMap::kCopy) landmarks = internal::broadcast(*group, best.owner, landmarks);
+  }
+  std::copy_n(pose.begin(), 5, e.best_pose);
+  e.map_size = static_cast<std::size_t>(pose[5]);
+  e.map = std::move(landmarks);
   return e;
 }
 
@@ -277,6 +309,11 @@ FilterStatistics Filter::statistics() const {
   const memory::HeapStats heap = s.heap.stats();
   st.live_nodes = heap.live_nodes;
   st.live_bytes = heap.live_bytes;
+  st.exchange_particles = s.exchange.particles;
+  st.exchange_copies = s.exchange.copies;
+  st.exchange_bytes = s.exchange.bytes;
+  st.exchange_naive_bytes = s.exchange.naive_bytes;
+  st.exchange_seconds = s.exchange.seconds;
   return st;
 }
 
@@ -293,6 +330,11 @@ const memory::ParticleStore& Filter::particles() {
 }
 
 void Filter::save(std::ostream& out) const {
+  if (impl_->state.group != nullptr) {
+    throw std::logic_error(
+        "Filter::save: this filter's particle set is spread over ranks, and a shared set has no "
+        "saved form; run on one process to save or checkpoint");
+  }
   internal::save_state(impl_->state, impl_->recorder.points(), out);
 }
 

@@ -28,6 +28,7 @@
 #include "engine/filter_config.h"
 #include "memory/landmark_tree.h"
 #include "memory/particle_store.h"
+#include "parallel/collective.h"
 
 namespace fastslam::engine {
 
@@ -150,6 +151,15 @@ struct FilterStatistics {
   // on the same data without ground truth. -inf after a scan every particle found impossible.
   // Since construction, across save and load.
   double log_evidence = 0.0;
+  // A rank of a particle set shared by a group (the Filter's group constructor), this rank's
+  // part: distinct particles and copies its resamplings sent to other ranks, the bytes of
+  // those messages, what sending each copy with its whole map would have cost, and the wall
+  // time of the exchanges. Zero without a group.
+  std::uint64_t exchange_particles = 0;
+  std::uint64_t exchange_copies = 0;
+  std::uint64_t exchange_bytes = 0;
+  std::uint64_t exchange_naive_bytes = 0;
+  double exchange_seconds = 0.0;
   // The node heap: live tree nodes and bytes of all maps together.
   std::int64_t live_nodes = 0;
   std::int64_t live_bytes = 0;
@@ -159,6 +169,16 @@ class Filter {
  public:
   // Throws std::invalid_argument as validate(config), and for Algorithm::kEkf (use EkfSlam).
   explicit Filter(const FilterConfig& config);
+  // One rank's part of a filter whose particle set is spread over `group`
+  // (parallel/collective.h; docs/distributed.md): config.particles is the whole set's M, of which
+  // this rank holds the share parallel::particle_share deals it (throws std::invalid_argument
+  // when the set has fewer blocks of 256 than the group has ranks). Every rank constructs it with
+  // the same config and then makes the same calls with the same data: predict, observe,
+  // set_map, estimate and take_trajectory are collective. Each returns on every rank the bits a
+  // one-process Filter returns (Estimate::best_particle is the set's index); `particles()` is
+  // this rank's share, and the statistics' times, landmark counts, live nodes and exchange
+  // figures are this rank's. `save` throws std::logic_error: a shared set has no saved form.
+  Filter(const FilterConfig& config, std::shared_ptr<parallel::Collective> group);
   ~Filter();
   Filter(const Filter&) = delete;
   Filter& operator=(const Filter&) = delete;

@@ -73,6 +73,13 @@ ParticleStore::ParticleStore(std::size_t particles, NodeHeap& heap, StoreOptions
                 0.0),
       maps_(particles, ParticleMap(heap, options.indexing)) {}
 
+void ParticleStore::append(std::size_t count) {
+  const std::size_t m = size() + count;
+  for (Column* c : {&x_, &y_, &theta_, &v_, &omega_, &log_weight_}) c->resize(m, 0.0);
+  if (options_.pose_covariance != PoseCovariance::kNone) pose_cov_.resize(m * kPoseCovStride, 0.0);
+  maps_.resize(m, ParticleMap(*heap_, options_.indexing));
+}
+
 void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t grain) {
   const std::size_t from_size = size();
   for (std::size_t k = 0; k < index.size(); ++k) {

@@ -74,6 +74,10 @@ class ParticleStore {
   ParticleMap empty_map() const noexcept { return ParticleMap(*heap_, options_.indexing); }
   std::size_t landmark_count(std::size_t particle) const noexcept { return maps_[particle].size(); }
 
+  // Adds `count` particles after the others, as the constructor makes them: room for
+  // particles arriving from another rank before a gather. O(M + count) (columns may move).
+  void append(std::size_t count);
+
   // Resampling: afterwards particle k is a copy of former particle index[k], for every k, and
   // the store holds index.size() particles. Throws std::invalid_argument naming the first bad
   // entry when an index is out of range, and then leaves the store unchanged.

@@ -337,12 +337,22 @@ Resampler::Resampler(ResamplePolicy policy, const ParticleKernel& kernel, std::s
 }
 
 WeightSummary Resampler::summarize(std::span<const double> log_weight) {
+  return summarize(log_weight, SharedSet{});
+}
+
+WeightSummary Resampler::summarize(std::span<const double> log_weight, const SharedSet& set) {
   particles_ = 0;
   const std::size_t m = log_weight.size();
   check_particle_count(m);
-  const std::size_t blocks = blocks_of(m);
+  Collective* const group = set.group;
+  const std::size_t total = group != nullptr ? set.total : m;
+  check_particle_count(total);
+  const std::size_t blocks = blocks_of(total);
+  const std::size_t b0 = group != nullptr ? set.first / kBlock : 0;
+  const std::size_t local_blocks = blocks_of(m);
   block_max_.resize(blocks);
   block_bad_.resize(blocks);
+  block_bad_value_.resize(blocks);
   block_square_.resize(blocks);
   block_offset_.resize(blocks + 1);
   if (local_prefix_.size() < m) {
@@ -352,20 +362,41 @@ WeightSummary Resampler::summarize(std::span<const double> log_weight) {
   const ParticleKernel& kernel = *kernel_;
   const std::size_t g = grain();
 
-  // Pass 1: the maximum, and the first NaN / +inf.
+  // Pass 1: the maximum, and the first NaN / +inf (as a particle of the whole set).
   kernel.for_each_fixed_block(
       m, kBlock,
       [&](std::size_t b, std::size_t begin, std::size_t end) {
         const BlockCheck check = check_block(l, begin, end);
-        block_max_[b] = check.max;
-        block_bad_[b] = check.bad;
+        block_max_[b0 + b] = check.max;
+        block_bad_[b0 + b] = check.bad == kNone ? kNone : set.first + check.bad;
+        block_bad_value_[b0 + b] = check.bad == kNone ? 0.0 : l[check.bad];
       },
       g);
+  if (group != nullptr) {
+    struct Check {
+      double max, bad_value;
+      std::uint64_t bad;
+    };
+    std::vector<Check> mine(local_blocks);
+    for (std::size_t b = 0; b < local_blocks; ++b) {
+      mine[b] = {block_max_[b0 + b], block_bad_value_[b0 + b], block_bad_[b0 + b]};
+    }
+    const std::vector<Check> all = all_gather_values(*group, std::span<const Check>(mine));
+    for (std::size_t b = 0; b < blocks; ++b) {
+      block_max_[b] = all[b].max;
+      block_bad_value_[b] = all[b].bad_value;
+      block_bad_[b] = all[b].bad;
+    }
+  }
   BlockCheck all;
+  double bad_value = 0.0;
   for (std::size_t b = 0; b < blocks; ++b) {
+    if (all.bad == kNone && block_bad_[b] != kNone) bad_value = block_bad_value_[b];
     all = combine_checks(all, {block_max_[b], block_bad_[b]});
   }
-  const double max = checked_max(all, log_weight);
+  if (all.bad != kNone) throw_bad_weight(all.bad, bad_value);
+  if (all.max == -kInf) throw_all_zero(total);
+  const double max = all.max;
 
   // Pass 2: e_i, the local prefixes, block sums and sums of squares.
   double* prefix = local_prefix_.data();
@@ -373,10 +404,22 @@ WeightSummary Resampler::summarize(std::span<const double> log_weight) {
       m, kBlock,
       [&](std::size_t b, std::size_t begin, std::size_t end) {
         const BlockSums sums = exp_prefix_block(l, max, prefix, begin, end);
-        block_offset_[b + 1] = sums.sum;
-        block_square_[b] = sums.square;
+        block_offset_[b0 + b + 1] = sums.sum;
+        block_square_[b0 + b] = sums.square;
       },
       g);
+  if (group != nullptr) {
+    std::vector<BlockSums> mine(local_blocks);
+    for (std::size_t b = 0; b < local_blocks; ++b) {
+      mine[b] = {block_offset_[b0 + b + 1], block_square_[b0 + b]};
+    }
+    const std::vector<BlockSums> all_sums =
+        all_gather_values(*group, std::span<const BlockSums>(mine));
+    for (std::size_t b = 0; b < blocks; ++b) {
+      block_offset_[b + 1] = all_sums[b].sum;
+      block_square_[b] = all_sums[b].square;
+    }
+  }
   // The block offsets (sequential scan) and the sum of squares (left fold).
   block_offset_[0] = 0.0;
   double square = 0.0;
@@ -384,15 +427,87 @@ WeightSummary Resampler::summarize(std::span<const double> log_weight) {
     block_offset_[b + 1] = block_offset_[b] + block_offset_[b + 1];
     square += block_square_[b];
   }
-  const double total = block_offset_[blocks];  // >= 1: the largest e_i is exp(0)
+  const double sum = block_offset_[blocks];  // >= 1: the largest e_i is exp(0)
   particles_ = m;
-  return {max, max + std::log(total), total * total / square};
+  total_ = total;
+  first_block_ = b0;
+  return {max, max + std::log(sum), sum * sum / square};
+}
+
+namespace {
+
+// The first output k < n with t_k >= c, or n: the outputs before it are drawn from particles
+// with C_i <= t_k. c == T (the last particles, and zero weights after them) takes every output
+// left, as the merge's `top` does.
+template <PointerModel Pointers>
+std::uint64_t first_output_at_least(const Pointers& pointers, double c, double total,
+                                    std::size_t n) noexcept {
+  if (c == total) return n;
+  const double guess = pointers.estimate(c, 0);
+  std::size_t k = !(guess > 0.0)                    ? 0
+                  : guess >= static_cast<double>(n) ? n
+                                                    : static_cast<std::size_t>(guess);
+  while (k > 0 && pointers.target_anywhere(k - 1) >= c) --k;
+  while (k < n && pointers.target_anywhere(k) < c) ++k;
+  return k;
+}
+
+}  // namespace
+
+std::uint64_t Resampler::draw_ranges(ResampleScheme scheme, std::uint64_t seed,
+                                     std::uint64_t step, std::span<std::uint64_t> ends) {
+  if (particles_ == 0) {
+    throw std::logic_error("Resampler::draw_ranges: no successful summarize before");
+  }
+  if (ends.size() != particles_) {
+    throw std::invalid_argument("Resampler::draw_ranges: " + std::to_string(ends.size()) +
+                                " ends for " + std::to_string(particles_) + " particles");
+  }
+  if (scheme == ResampleScheme::kMultinomial) {
+    throw std::invalid_argument(
+        "resample: multinomial resampling is not available over ranks (its pointers are a "
+        "scan over every rank's spacings); use systematic or stratified");
+  }
+  const std::size_t n = total_;
+  const double total = block_offset_[blocks_of(total_)];
+  const double scale = total / static_cast<double>(n);
+  const double inverse_scale = static_cast<double>(n) / total;
+  const double* offset = block_offset_.data() + first_block_;
+  const double* prefix = local_prefix_.data();
+  auto run = [&](const auto& pointers) {
+    // C_{first - 1} is the set's offset at this rank's first block: the same sum, so the same
+    // bits, as the previous rank's last cumulative weight.
+    const std::uint64_t start =
+        first_block_ == 0 ? 0 : first_output_at_least(pointers, offset[0], total, n);
+    kernel_->for_each_block(
+        particles_,
+        [&](std::size_t begin, std::size_t end) {
+          for (std::size_t i = begin; i < end; ++i) {
+            ends[i] = first_output_at_least(pointers, offset[i / kBlock] + prefix[i], total, n);
+          }
+        },
+        grain());
+    return start;
+  };
+  if (scheme == ResampleScheme::kSystematic) {
+    RandomStream stream(StreamKey{seed, step, 0, Purpose::kResample});
+    return run(SystematicPointers{stream.uniform(), scale, inverse_scale});
+  }
+  StratifiedPointers pointers;
+  pointers.seed = seed;
+  pointers.step = step;
+  pointers.scale = scale;
+  pointers.inverse_scale = inverse_scale;
+  return run(pointers);
 }
 
 void Resampler::draw(ResampleScheme scheme, std::uint64_t seed, std::uint64_t step,
                      std::span<std::uint32_t> ancestors) {
   if (particles_ == 0) {
     throw std::logic_error("Resampler::draw: no successful summarize before");
+  }
+  if (total_ != particles_) {
+    throw std::logic_error("Resampler::draw: the summary is of a shared set; use draw_ranges");
   }
   const std::size_t n = ancestors.size();
   check_draw_count(n);
@@ -484,6 +599,25 @@ ResampleOutcome Resampler::resample(memory::ParticleStore& store, std::uint64_t 
   draw(policy_.scheme, seed, step, ancestors_);
   kernel.execute([&] { store.gather(ancestors_, g); });
   fill_in_place(store.log_weight(), -std::log(static_cast<double>(m)), kernel, g);
+  return {true, summary};
+}
+
+ResampleOutcome Resampler::resample(memory::ParticleStore& store, std::uint64_t seed,
+                                    std::uint64_t step, const SharedSet& set,
+                                    const MoveParticles& move) {
+  const std::span<double> log_weight = store.log_weight();
+  const WeightSummary summary = summarize(log_weight, set);
+  const std::size_t total = total_;
+  const ParticleKernel& kernel = *kernel_;
+  if (!should_resample(policy_, summary.effective_sample_size, total)) {
+    subtract_in_place(log_weight, summary.log_sum, kernel, grain());
+    ancestors_.clear();
+    return {false, summary};
+  }
+  ends_.resize(log_weight.size());
+  const std::uint64_t start = draw_ranges(policy_.scheme, seed, step, ends_);
+  move(start, ends_);
+  fill_in_place(store.log_weight(), -std::log(static_cast<double>(total)), kernel, grain());
   return {true, summary};
 }
 

@@ -17,12 +17,14 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
 #include <oneapi/tbb/cache_aligned_allocator.h>
 
 #include "memory/particle_store.h"
+#include "parallel/collective.h"
 #include "parallel/particle_kernel.h"
 
 namespace fastslam::parallel {
@@ -50,6 +52,15 @@ struct WeightSummary {
   double max_log_weight = 0.0;         // m = max l_i
   double log_sum = 0.0;                // log sum exp(l_i), by log-sum-exp
   double effective_sample_size = 0.0;  // N_eff = 1 / sum w_i^2, in [1, M]
+};
+
+// A particle set shared by a group of ranks (parallel/collective.h), for the distributed forms:
+// this rank holds particles [first, first + its count) of `total`, as particle_share deals them.
+// Without a group the set is the local particles alone.
+struct SharedSet {
+  Collective* group = nullptr;
+  std::size_t first = 0;
+  std::size_t total = 0;
 };
 
 // The result of `Resampler::resample`.
@@ -81,10 +92,23 @@ class Resampler {
   ResampleOutcome resample(memory::ParticleStore& store, std::uint64_t seed, std::uint64_t step,
                            std::size_t grain = 0);
 
+  // `resample` over a shared set, of which `store` holds this rank's share (a collective call):
+  // the summary and the decision are the set's; the draw is draw_ranges'; `move(start, ends)`
+  // must then replace the store by this rank's share of the outputs (the engine's particle
+  // exchange), after which every log-weight is -log(set.total). Throws as summarize and
+  // draw_ranges (then changing nothing), and what `move` throws.
+  using MoveParticles = std::function<void(std::uint64_t start, std::span<const std::uint64_t>)>;
+  ResampleOutcome resample(memory::ParticleStore& store, std::uint64_t seed, std::uint64_t step,
+                           const SharedSet& set, const MoveParticles& move);
+
   // Validates `log_weight` and returns its summary; keeps the cumulative weights for `draw`.
   // Throws std::invalid_argument (empty, or NaN / +inf at a named particle), std::domain_error
   // (every weight zero) or std::length_error (more than 2^32 - 1 particles).
   WeightSummary summarize(std::span<const double> log_weight);
+  // The same over a shared set, of which `log_weight` is this rank's share: a collective call
+  // (two all_gathers of a few doubles per block); every rank gets the summary, and throws the
+  // same error, one process would over all particles (the errors name global particles).
+  WeightSummary summarize(std::span<const double> log_weight, const SharedSet& set);
 
   // Fills `ancestors` (N = ancestors.size() draws; N may differ from M, and 0 draws nothing)
   // with the indices drawn by `scheme` from the weights of the last `summarize`. Sorted
@@ -93,11 +117,21 @@ class Resampler {
   void draw(ResampleScheme scheme, std::uint64_t seed, std::uint64_t step,
             std::span<std::uint32_t> ancestors);
 
+  // The draw of `scheme` with as many outputs as the set has particles, from this rank's side:
+  // ends[i] (for each local particle i, ends.size() == its count) is one past the last output
+  // drawn from it, so its copies are the outputs [ends[i - 1], ends[i]), with ends[-1] the
+  // returned start; outputs are global indices, as `draw` would number them, and the ranges
+  // count `draw`'s ancestors exactly (same pointers, same cumulative weights). O(M / R) with
+  // no communication. Throws std::invalid_argument for kMultinomial, whose pointers need every
+  // rank's spacings, or a wrong `ends` size; std::logic_error as draw.
+  std::uint64_t draw_ranges(ResampleScheme scheme, std::uint64_t seed, std::uint64_t step,
+                            std::span<std::uint64_t> ends);
+
   // C_i, the blocked cumulative weight of particle i (unnormalised: C_{M-1} = sum exp(l_i - m)),
   // from the last successful `summarize`; for tests and diagnostics. O(1).
   // REQUIRES: i < M of that summarize.
   double cumulative_weight(std::size_t i) const noexcept {
-    return block_offset_[i / ParticleKernel::kReduceBlock] + local_prefix_[i];
+    return block_offset_[first_block_ + i / ParticleKernel::kReduceBlock] + local_prefix_[i];
   }
 
   // The indices of the last draw of `resample` (empty when it did not resample).
@@ -110,14 +144,18 @@ class Resampler {
   const ParticleKernel* kernel_;
   std::size_t grain_;                   // 0: the kernel's
   std::size_t particles_ = 0;           // M of the last successful summarize (0: none)
+  std::size_t total_ = 0;               // the set's M (= particles_ without a group)
+  std::size_t first_block_ = 0;         // the set's block of local particle 0
   Buffer local_prefix_;                 // L_i
-  Buffer block_offset_;                 // O_b, b = 0..B (O_B = T)
+  Buffer block_offset_;                 // O_b, b = 0..B (O_B = T), over the whole set
   Buffer block_square_;                 // per block sum of e_i^2
   Buffer block_max_;                    // per block max l_i
   std::vector<std::size_t> block_bad_;  // per block first NaN / +inf particle (or none)
+  Buffer block_bad_value_;              // its log-weight
   Buffer spacing_prefix_;               // multinomial: local prefix of the exponential spacings
   Buffer spacing_offset_;               // multinomial: block offsets of the spacings
   std::vector<std::uint32_t> ancestors_;
+  std::vector<std::uint64_t> ends_;
 };
 
 // Convenience forms that allocate their buffers per call.

@@ -19,6 +19,7 @@
 #include "engine/measurement_model.h"
 #include "memory/node_heap.h"
 #include "memory/particle_store.h"
+#include "parallel/collective.h"
 
 namespace fastslam::engine::internal {
 
@@ -42,16 +43,28 @@ struct FilterCounters {
   double observe_wall_seconds = 0.0;
 };
 
+// What a rank's resamplings sent to other ranks (a shared set; statistics only).
+struct ExchangeTotals {
+  std::uint64_t particles = 0, copies = 0, bytes = 0, naive_bytes = 0;
+  double seconds = 0.0;
+};
+
 // The store a configuration needs: a spatial index per map for unknown association (known ids
 // find landmarks by slot); FastSLAM 2.0's covariances, carried through resampling without
 // odometry, where the velocities' covariance outlives the scan (draw_state).
 memory::StoreOptions store_options(const FilterConfig& config);
 
 struct FilterState {
-  // REQUIRES: validate(config) passed.
-  explicit FilterState(const FilterConfig& c);
+  // REQUIRES: validate(config) passed. With a group, this rank's share of config.particles
+  // (parallel::particle_share; throws std::invalid_argument when the set is too small to deal).
+  explicit FilterState(const FilterConfig& c, parallel::Collective* group = nullptr);
+  FilterState(const FilterConfig& c, parallel::Collective* group, parallel::ParticleShare share);
 
   FilterConfig config;
+  // The ranks sharing the particle set (nullptr: the store holds all of it), and the set's
+  // index of local particle 0, which keys the particles' random streams.
+  parallel::Collective* group;
+  std::uint32_t first_particle;
   memory::PoolHeap heap;  // before the store: outlives every map
   memory::ParticleStore store;
   PoseCovariances covariances;
@@ -63,6 +76,7 @@ struct FilterState {
   // of eq. 70 over the observations seen so far, and of set_map's), for the candidate search.
   double landmark_variance_bound = 0.0;
   FilterCounters counters;
+  ExchangeTotals exchange;
   // The clock (Estimate::time): the data's time; `timed` once a time was given.
   double time = 0.0;
   bool timed = false;

@@ -50,8 +50,10 @@ class MotionNormalsAhead {
  public:
   static constexpr std::size_t kMaxParticles = 4096;  // bounds the windows' memory
 
-  MotionNormalsAhead(const parallel::ParticleKernel& kernel, std::uint64_t seed)
-      : seed_(seed), task_(kernel) {}
+  // `first_particle`: the set's index of local particle 0 (lane 0).
+  MotionNormalsAhead(const parallel::ParticleKernel& kernel, std::uint64_t seed,
+                     std::uint32_t first_particle)
+      : seed_(seed), first_(first_particle), task_(kernel) {}
 
   // The window drawn for this pass (empty until the first start_next).
   const MotionNormalsWindow& ready() const { return windows_[ready_]; }
@@ -66,9 +68,9 @@ class MotionNormalsAhead {
     std::iota(next.keys.begin(), next.keys.end(), scan_step + 1);
     next.lanes = padded_lanes(m);
     next.values.resize(2 * next.keys.size() * next.lanes);
-    task_.start([&next, seed = seed_] {
+    task_.start([&next, seed = seed_, first = first_] {
       const std::span<double> out(next.values);
-      parallel::normal_pairs_for_particles(seed, next.keys, parallel::Purpose::kMotion, 0,
+      parallel::normal_pairs_for_particles(seed, next.keys, parallel::Purpose::kMotion, first,
                                            next.lanes, out, out.subspan(next.lanes),
                                            2 * next.lanes);
     });
@@ -76,6 +78,7 @@ class MotionNormalsAhead {
 
  private:
   std::uint64_t seed_;
+  std::uint32_t first_;
   MotionNormalsWindow windows_[2];
   int ready_ = 0;
   parallel::BackgroundTask task_;  // declared after the windows: destroyed, so waited for, first

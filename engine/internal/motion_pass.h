@@ -35,6 +35,9 @@ struct MotionScratch {
 struct MotionInput {
   std::span<const PendingControl> pending;
   std::uint64_t seed = 0;
+  // The set's index of local particle 0 (a rank's share of a distributed set; 0 otherwise):
+  // the streams are keyed by the set's indices.
+  std::uint32_t first_particle = 0;
   double sigma_control[2] = {0.0, 0.0};
   const MotionNormalsWindow* ahead = nullptr;  // FastSLAM 1.0: normals drawn ahead (may be empty)
 };
@@ -53,7 +56,8 @@ inline void draw_motion_normals(const MotionInput& in, std::span<const std::uint
   if (drawn < keys.size()) {
     const std::span<double> rest = normals.subspan(2 * drawn * lanes);
     parallel::normal_pairs_for_particles(in.seed, keys.subspan(drawn), parallel::Purpose::kMotion,
-                                         static_cast<std::uint32_t>(begin), lanes, rest,
+                                         in.first_particle + static_cast<std::uint32_t>(begin),
+                                         lanes, rest,
                                          rest.subspan(lanes), 2 * lanes);
   }
 }

@@ -61,7 +61,7 @@ class ParticlePass final : public Pass {
         s_(state),
         kernel_(kernel),
         recorder_(recorder),
-        ahead_(kernel, state.config.seed) {}
+        ahead_(kernel, state.config.seed, state.first_particle) {}
   ~ParticlePass() noexcept override = default;
   ParticlePass(const ParticlePass&) = delete;
   ParticlePass& operator=(const ParticlePass&) = delete;
@@ -87,6 +87,7 @@ class ParticlePass final : public Pass {
     PassInputs in;
     in.motion.pending = s_.pending;
     in.motion.seed = c.seed;
+    in.motion.first_particle = s_.first_particle;
     in.motion.sigma_control[0] = c.motion.sigma_control[0];
     in.motion.sigma_control[1] = c.motion.sigma_control[1];
     in.motion.ahead = &ahead_.ready();
@@ -141,7 +142,8 @@ class ParticlePass final : public Pass {
         // kProposal), for the whole block in one vectorised batch.
         scratch.draws.resize(static_cast<std::size_t>(N) * (end - begin));
         parallel::normals_for_particles(s_.config.seed, in.scan_step, parallel::Purpose::kProposal,
-                                        static_cast<std::uint32_t>(begin), end - begin, N,
+                                        s_.first_particle + static_cast<std::uint32_t>(begin),
+                                        end - begin, N,
                                         scratch.draws);
       }
       if constexpr (kKnown) {
@@ -207,7 +209,8 @@ class ParticlePass final : public Pass {
     if constexpr (kMl) {
       log_w = associate_maximum_likelihood(scratch.search.candidates, log_p0, chosen);
     } else {
-      parallel::RandomStream stream({s_.config.seed, in.scan_step, static_cast<std::uint32_t>(i),
+      parallel::RandomStream stream({s_.config.seed, in.scan_step,
+                                     s_.first_particle + static_cast<std::uint32_t>(i),
                                      parallel::Purpose::kAssociation});
       log_w = associate_sampling(scratch.search.candidates, log_p0, stream, chosen, scratch.taken);
     }

@@ -2,9 +2,12 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
+
+#include "engine/internal/particle_exchange.h"
 
 namespace fastslam::engine::internal {
 
@@ -24,8 +27,26 @@ void ResampleStage::run(FilterState& state, std::uint64_t scan_step, bool heavy)
     const std::size_t threads = kernel_.threads();
     const std::size_t grain =
         heavy && threads > 1 ? std::max<std::size_t>(1, state.store.size() / (4 * threads)) : 0;
-    const parallel::ResampleOutcome outcome =
-        resampler_.resample(state.store, state.config.seed, scan_step, grain);
+    parallel::ResampleOutcome outcome;
+    if (state.group == nullptr) {
+      outcome = resampler_.resample(state.store, state.config.seed, scan_step, grain);
+    } else {
+      // A shared set: the set's draw, then the particles bound for other ranks move.
+      const parallel::SharedSet set{state.group, state.first_particle, state.config.particles};
+      outcome = resampler_.resample(
+          state.store, state.config.seed, scan_step, set,
+          [&](std::uint64_t start, std::span<const std::uint64_t> ends) {
+            const Clock::time_point e0 = Clock::now();
+            const ExchangeCounts moved =
+                exchange_particles(state, kernel_, start, ends, std::max<std::size_t>(grain, 256));
+            ExchangeTotals& x = state.exchange;
+            x.particles += moved.particles_sent;
+            x.copies += moved.copies_sent;
+            x.bytes += moved.bytes_sent;
+            x.naive_bytes += moved.naive_bytes;
+            x.seconds += std::chrono::duration<double>(Clock::now() - e0).count();
+          });
+    }
     counters.resamples += outcome.resampled ? 1 : 0;
     counters.log_evidence += outcome.before.log_sum;
   } catch (const std::invalid_argument& e) {
@@ -34,8 +55,10 @@ void ResampleStage::run(FilterState& state, std::uint64_t scan_step, bool heavy)
                              std::to_string(counters.scans) + " (step " +
                              std::to_string(scan_step) + "): " + e.what());
   } catch (const std::domain_error&) {
-    // The maps already hold the scan; start the weights afresh rather than stop.
-    parallel::reset_log_weights(state.store.log_weight(), kernel_);
+    // The maps already hold the scan; start the weights afresh rather than stop (every rank
+    // of a shared set takes this branch: the summary is the set's).
+    const std::span<double> lw = state.store.log_weight();
+    std::fill(lw.begin(), lw.end(), -std::log(static_cast<double>(state.config.particles)));
     ++counters.weight_resets;
     counters.log_evidence = -std::numeric_limits<double>::infinity();
   }

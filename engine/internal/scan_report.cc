@@ -5,14 +5,9 @@
 namespace fastslam::engine::internal {
 
 std::vector<ObservationAssociation> report_scan(const memory::ParticleStore& store,
-                                                const ScanRecords& records,
+                                                std::size_t best, const ScanRecords& records,
                                                 const std::vector<PlannedObservation>& scan,
                                                 bool known_ids, std::uint64_t scan_step) {
-  const std::span<const double> lw = store.log_weight();
-  std::size_t best = 0;
-  for (std::size_t i = 1; i < lw.size(); ++i) {
-    if (lw[i] > lw[best]) best = i;
-  }
   std::vector<ObservationAssociation> report(scan.size());
   for (std::size_t j = 0; j < scan.size(); ++j) {
     ObservationAssociation& a = report[j];

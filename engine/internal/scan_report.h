@@ -49,9 +49,9 @@ class ScanRecords {
   std::vector<double> mahalanobis2_;
 };
 
-// The report of scan `scan_step` for the particle of highest log-weight in `store` (lowest index
-// on ties), whose row of `records` the pass wrote and whose map holds the scan's update.
-std::vector<ObservationAssociation> report_scan(const memory::ParticleStore& store,
+// The report of scan `scan_step` for particle `best` of `store` (the set's most likely,
+// shared_set.h), whose row of `records` the pass wrote and whose map holds the scan's update.
+std::vector<ObservationAssociation> report_scan(const memory::ParticleStore& store, std::size_t best,
                                                 const ScanRecords& records,
                                                 const std::vector<PlannedObservation>& scan,
                                                 bool known_ids, std::uint64_t scan_step);

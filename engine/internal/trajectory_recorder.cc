@@ -3,13 +3,17 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 
 namespace fastslam::engine::internal {
 
 void TrajectoryRecorder::begin(std::span<const double> log_weight, std::size_t controls) {
   // Every entry is written by the motion pass (record_poses): no need to clear it.
   recorded_.resize(controls * log_weight.size() * 4);
-  const double max_lw = *std::max_element(log_weight.begin(), log_weight.end());
+  double max_lw = *std::max_element(log_weight.begin(), log_weight.end());
+  if (group_ != nullptr) {
+    for (const double m : parallel::all_gather_value(*group_, max_lw)) max_lw = std::max(max_lw, m);
+  }
   weights_.resize(log_weight.size());
   for (std::size_t i = 0; i < log_weight.size(); ++i) {
     weights_[i] = std::exp(log_weight[i] - max_lw);
@@ -20,25 +24,56 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
                                 std::uint64_t first_control) {
   using Sums = std::array<double, 5>;
   const std::size_t m = weights_.size();
-  for (std::size_t k = 0; k < controls; ++k) {
+  auto block_sums = [&](std::size_t k, std::size_t begin, std::size_t end) {
     const double* rec = &recorded_[k * m * 4];
-    const Sums sums = kernel.reduce(
-        m, Sums{},
-        [&](std::size_t begin, std::size_t end) {
-          Sums part{};
-          for (std::size_t i = begin; i < end; ++i) {
-            const double w = weights_[i];
-            part[0] += w;
-            for (int c = 0; c < 4; ++c) part[c + 1] += w * rec[i * 4 + c];
-          }
-          return part;
-        },
-        [](const Sums& a, const Sums& b) {
-          return Sums{a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3], a[4] + b[4]};
-        });
+    Sums part{};
+    for (std::size_t i = begin; i < end; ++i) {
+      const double w = weights_[i];
+      part[0] += w;
+      for (int c = 0; c < 4; ++c) part[c + 1] += w * rec[i * 4 + c];
+    }
+    return part;
+  };
+  auto add = [](const Sums& a, const Sums& b) {
+    return Sums{a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3], a[4] + b[4]};
+  };
+  auto record = [&](std::size_t k, const Sums& sums) {
     points_.push_back(
         {first_control + k, sums[1] / sums[0], sums[2] / sums[0], std::atan2(sums[4], sums[3])});
+  };
+  if (group_ == nullptr) {
+    for (std::size_t k = 0; k < controls; ++k) {
+      record(k, kernel.reduce(
+                    m, Sums{},
+                    [&](std::size_t begin, std::size_t end) { return block_sums(k, begin, end); },
+                    add));
+    }
+    return;
   }
+  // A rank of a shared set: every control's block sums in one gather (rank r's blocks, control
+  // by control), then each control folded over the set's blocks in order, as kernel.reduce.
+  constexpr std::size_t kBlock = parallel::ParticleKernel::kReduceBlock;
+  const std::size_t blocks = (m + kBlock - 1) / kBlock;
+  std::vector<Sums> mine(controls * blocks);
+  kernel.for_each_fixed_block(m, kBlock, [&](std::size_t b, std::size_t begin, std::size_t end) {
+    for (std::size_t k = 0; k < controls; ++k) mine[k * blocks + b] = block_sums(k, begin, end);
+  });
+  std::vector<std::size_t> sizes;
+  const parallel::Bytes all = group_->all_gather(std::as_bytes(std::span(mine)), &sizes);
+  std::vector<Sums> sums(controls, Sums{});
+  std::size_t at = 0;
+  for (const std::size_t bytes : sizes) {
+    const std::size_t rank_blocks = controls == 0 ? 0 : bytes / sizeof(Sums) / controls;
+    for (std::size_t k = 0; k < controls; ++k) {
+      for (std::size_t b = 0; b < rank_blocks; ++b) {
+        Sums block;
+        std::memcpy(&block, all.data() + at + (k * rank_blocks + b) * sizeof(Sums), sizeof(Sums));
+        sums[k] = add(sums[k], block);
+      }
+    }
+    at += bytes;
+  }
+  for (std::size_t k = 0; k < controls; ++k) record(k, sums[k]);
 }
 
 }  // namespace fastslam::engine::internal

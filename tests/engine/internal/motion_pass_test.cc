@@ -148,7 +148,7 @@ TEST(MotionPassTest, BlocksAndTheAheadWindowChangeNoBit) {
   // A window holding the first four of the six steps (keys 3, 5, 7 are steps 3..9 in twos:
   // the window is contiguous, so it holds steps 3..6 and the pass draws the rest itself).
   parallel::ParticleKernel kernel({2, 16});
-  MotionNormalsAhead drawer(kernel, kSeed);
+  MotionNormalsAhead drawer(kernel, kSeed, 0);
   drawer.start_next(2, 3, m);  // steps 3, 4, 5, 6
   drawer.start_next(100, 0, m);
   advance<BaileyCarModel, false>(motion, ahead, {0, m}, drawer.ready(), nullptr);
@@ -160,9 +160,13 @@ TEST(MotionPassTest, BlocksAndTheAheadWindowChangeNoBit) {
   }
 }
 
-TEST(MotionNormalsAheadTest, WindowCopiesTheKeyedNormals) {
+// Lane l of a window is particle first + l of the set (a rank's share starts at `first`).
+class MotionNormalsAheadTest : public ::testing::TestWithParam<std::uint32_t> {};
+
+TEST_P(MotionNormalsAheadTest, WindowCopiesTheKeyedNormals) {
+  const std::uint32_t first = GetParam();
   parallel::ParticleKernel kernel({2, 16});
-  MotionNormalsAhead drawer(kernel, kSeed);
+  MotionNormalsAhead drawer(kernel, kSeed, first);
   EXPECT_TRUE(drawer.ready().keys.empty());
   drawer.start_next(9, 2, 20);  // draws steps 10, 11, 12
   drawer.start_next(50, 0, 20);
@@ -175,7 +179,7 @@ TEST(MotionNormalsAheadTest, WindowCopiesTheKeyedNormals) {
     for (std::size_t l = 0; l < 8; ++l) {
       double n[2];
       parallel::normal_pairs_for_particles(kSeed, steps[j], parallel::Purpose::kMotion,
-                                           static_cast<std::uint32_t>(8 + l), 1, {&n[0], 1},
+                                           first + static_cast<std::uint32_t>(8 + l), 1, {&n[0], 1},
                                            {&n[1], 1});
       EXPECT_EQ(out[2 * j * 8 + l], n[0]);
       EXPECT_EQ(out[(2 * j + 1) * 8 + l], n[1]);
@@ -184,6 +188,8 @@ TEST(MotionNormalsAheadTest, WindowCopiesTheKeyedNormals) {
   EXPECT_EQ(w.copy(std::vector<std::uint64_t>{9}, 0, 8, out), 0u);
   EXPECT_EQ(w.copy(steps, 16, 16, out), 0u);  // beyond the window's lanes
 }
+
+INSTANTIATE_TEST_SUITE_P(FirstParticles, MotionNormalsAheadTest, ::testing::Values(0u, 768u));
 
 }  // namespace
 }  // namespace fastslam::engine::internal
