@@ -16,12 +16,14 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "memory/node_heap.h"
 #include "memory/particle_store.h"
+#include "parallel/collective.h"
 #include "parallel/internal/exp.h"
 #include "parallel/random_stream.h"
 
@@ -685,6 +687,103 @@ TEST(Draw, SchemesUseDifferentPointersButTheSameStreams) {
     EXPECT_EQ(draw(scheme, l, 1, 1, 1000, kernel), draw(scheme, l, 1, 1, 1000, kernel));
     EXPECT_NE(draw(scheme, l, 1, 1, 1000, kernel), draw(scheme, l, 1, 2, 1000, kernel));
     EXPECT_NE(draw(scheme, l, 1, 1, 1000, kernel), draw(scheme, l, 2, 1, 1000, kernel));
+  }
+}
+
+// draw_ranges counts draw's ancestors: particle i's copies are the outputs [ends[i - 1],
+// ends[i]), on one process and over ranks (threads of a LocalGroup, each its share), for every
+// shape (zero weights, one survivor, underflow) and both schemes that work over ranks.
+TEST(Draw, RangesCountTheAncestorsOnOneProcessAndOverRanks) {
+  for (ResampleScheme scheme : {ResampleScheme::kSystematic, ResampleScheme::kStratified}) {
+    for (Shape shape : kShapes) {
+      for (std::size_t m : {1ul, 255ul, 257ul, 1500ul}) {
+        SCOPED_TRACE(std::string(name(scheme)) + ", " + std::to_string(m) + " particles, shape " +
+                     std::to_string(static_cast<int>(shape)));
+        const std::vector<double> l = make_log_weights(m, shape);
+        const ParticleKernel one({1, 64});
+        const std::vector<std::uint32_t> ancestors = draw(scheme, l, 5, 9, m, one);
+        std::vector<std::uint64_t> want(m, 0);  // one past the last output of particle i
+        for (std::size_t k = 0; k < m; ++k) want[ancestors[k]] = k + 1;
+        for (std::size_t i = 1; i < m; ++i) want[i] = std::max(want[i], want[i - 1]);
+        Resampler alone({}, one);
+        alone.summarize(l);
+        std::vector<std::uint64_t> ends(m);
+        EXPECT_EQ(alone.draw_ranges(scheme, 5, 9, ends), 0u);
+        ASSERT_EQ(ends, want);
+        const int most = static_cast<int>((m + ParticleKernel::kReduceBlock - 1) /
+                                          ParticleKernel::kReduceBlock);
+        for (int ranks = 2; ranks <= std::min(most, 4); ++ranks) {
+          LocalGroup group(ranks);
+          std::vector<std::thread> threads;
+          for (int r = 0; r < ranks; ++r) {
+            threads.emplace_back([&, r, member = group.member(r)] {
+              const ParticleShare share = particle_share(m, ranks, r);
+              const ParticleKernel kernel({2, 64});
+              Resampler shared({}, kernel);
+              const std::span<const double> mine(l.data() + share.first, share.count);
+              shared.summarize(mine, SharedSet{member.get(), share.first, m});
+              std::vector<std::uint64_t> got(share.count);
+              const std::uint64_t start = shared.draw_ranges(scheme, 5, 9, got);
+              EXPECT_EQ(start, share.first == 0 ? 0 : want[share.first - 1]) << "rank " << r;
+              for (std::size_t i = 0; i < share.count; ++i) {
+                EXPECT_EQ(got[i], want[share.first + i]) << "rank " << r << ", particle " << i;
+              }
+            });
+          }
+          for (std::thread& t : threads) t.join();
+        }
+      }
+    }
+  }
+  const ParticleKernel kernel({1, 64});
+  Resampler r({}, kernel);
+  std::vector<std::uint64_t> ends(3);
+  EXPECT_THROW(r.draw_ranges(ResampleScheme::kSystematic, 1, 1, ends), std::logic_error);
+  r.summarize(std::vector<double>{0.0, 0.0, 0.0});
+  EXPECT_THROW(r.draw_ranges(ResampleScheme::kMultinomial, 1, 1, ends), std::invalid_argument);
+}
+
+// The shared summary is the one-process summary on every rank, errors included: a NaN on one
+// rank is reported, by its index in the set, on all.
+TEST(WeightSummary, SharedSetsGiveTheOneProcessSummaryAndErrors) {
+  constexpr std::size_t m = 1300;
+  std::vector<double> l = make_log_weights(m, Shape::kPeaked);
+  for (int pass = 0; pass < 2; ++pass) {
+    const ParticleKernel one({1, 64});
+    Resampler alone({}, one);
+    std::string want_error;
+    WeightSummary want{};
+    try {
+      want = alone.summarize(l);
+    } catch (const std::invalid_argument& e) {
+      want_error = e.what();
+    }
+    LocalGroup group(3);
+    std::vector<std::thread> threads;
+    for (int r = 0; r < 3; ++r) {
+      threads.emplace_back([&, r, member = group.member(r)] {
+        const ParticleShare share = particle_share(m, 3, r);
+        const ParticleKernel kernel({1, 64});
+        Resampler shared({}, kernel);
+        try {
+          const WeightSummary got = shared.summarize(
+              std::span<const double>(l.data() + share.first, share.count),
+              SharedSet{member.get(), share.first, m});
+          EXPECT_TRUE(want_error.empty());
+          EXPECT_EQ(std::bit_cast<std::uint64_t>(got.log_sum),
+                    std::bit_cast<std::uint64_t>(want.log_sum));
+          EXPECT_EQ(std::bit_cast<std::uint64_t>(got.effective_sample_size),
+                    std::bit_cast<std::uint64_t>(want.effective_sample_size));
+          for (std::size_t i = 0; i < share.count; i += 50) {
+            EXPECT_EQ(shared.cumulative_weight(i), alone.cumulative_weight(share.first + i));
+          }
+        } catch (const std::invalid_argument& e) {
+          EXPECT_EQ(std::string(e.what()), want_error) << "rank " << r;
+        }
+      });
+    }
+    for (std::thread& t : threads) t.join();
+    l[1000] = std::numeric_limits<double>::quiet_NaN();  // on rank 2, for the second pass
   }
 }
 
