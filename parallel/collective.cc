@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <barrier>
+#include <cstdlib>
 #include <string>
 
 namespace fastslam::parallel {
@@ -89,6 +90,9 @@ class LocalMember final : public Collective {
     g.sync.arrive_and_wait();
     return from;
   }
+
+  // The ranks are threads of this process: ending it ends them all.
+  [[noreturn]] void abort(int code) override { std::_Exit(code); }
 
  private:
   LocalGroup::Shared& group() const { return *shared_; }

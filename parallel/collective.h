@@ -39,6 +39,9 @@ class Collective {
   // to[d] goes to rank d (to.size() == size(); to[rank()] is not sent). Returns from[s], what
   // rank s sent to this one (from[rank()] empty).
   virtual std::vector<Bytes> exchange(const std::vector<Bytes>& to) = 0;
+  // Ends every rank of the group now with exit code `code`: for an error on one rank while the
+  // others wait in a collective call, which would otherwise hang them (MPI_Abort).
+  [[noreturn]] virtual void abort(int code) = 0;
 };
 
 // The particles [first, first + count) of `total` that rank `rank` of `ranks` holds: whole

@@ -3,6 +3,7 @@
 #include <mpi.h>
 
 #include <climits>
+#include <cstdlib>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -101,6 +102,11 @@ class MpiCollective final : public Collective {
                      received.begin() + recv_at[s] + recv_counts[s]);
     }
     return from;
+  }
+
+  [[noreturn]] void abort(int code) override {
+    MPI_Abort(MPI_COMM_WORLD, code);
+    std::_Exit(code);  // MPI_Abort returns only if MPI could not end the job
   }
 
  private:

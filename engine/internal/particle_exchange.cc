@@ -32,7 +32,7 @@ void put(std::ostream& out, const void* data, std::size_t bytes) {
 
 void get(std::istream& in, void* data, std::size_t bytes, int from) {
   if (!in.read(static_cast<char*>(data), static_cast<std::streamsize>(bytes))) {
-    throw std::runtime_error("resampling exchange: the message from rank " + std::to_string(from) +
+    throw std::logic_error("resampling exchange: the message from rank " + std::to_string(from) +
                              " is truncated (are all ranks running the same fastslam?)");
   }
 }
@@ -110,7 +110,7 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
     std::uint64_t arriving = 0;
     get(in, &arriving, sizeof arriving, r);
     if (arriving == 0 || arriving > shares[me].count) {
-      throw std::runtime_error("resampling exchange: rank " + std::to_string(r) + " sent " +
+      throw std::logic_error("resampling exchange: rank " + std::to_string(r) + " sent " +
                                std::to_string(arriving) + " particles for " +
                                std::to_string(shares[me].count) + " slots");
     }
@@ -127,7 +127,7 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
       store.omega()[k] = p.pose[4];
       if (carried) get(in, &store.pose_cov()[k * kCov], kCov * sizeof(double), r);
       if (p.copies == 0 || p.copies > shares[me].count) {
-        throw std::runtime_error("resampling exchange: a bad copy count from rank " +
+        throw std::logic_error("resampling exchange: a bad copy count from rank " +
                                  std::to_string(r));
       }
       index.insert(index.end(), p.copies, static_cast<std::uint32_t>(k));
@@ -148,12 +148,12 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
       }
       graph.finish();
     } catch (const memory::TreeGraphError& e) {
-      throw std::runtime_error("resampling exchange: the maps from rank " + std::to_string(r) +
+      throw std::logic_error("resampling exchange: the maps from rank " + std::to_string(r) +
                                ": " + e.what());
     }
   }
   if (index.size() != shares[me].count) {
-    throw std::runtime_error("resampling exchange: rank " + std::to_string(me) + " received " +
+    throw std::logic_error("resampling exchange: rank " + std::to_string(me) + " received " +
                              std::to_string(index.size()) + " particles for " +
                              std::to_string(shares[me].count) + " slots");
   }

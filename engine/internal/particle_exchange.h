@@ -32,8 +32,8 @@ struct ExchangeCounts {
 };
 
 // REQUIRES: s.group; `ends` of s.store.size() entries and `start` from draw_ranges over the set.
-// Throws std::runtime_error when a message does not parse (ranks built from different
-// programs), and what the heap throws.
+// Throws std::logic_error when a message does not parse (ranks built from different programs:
+// a rank's own failure, which the others cannot know of), and what the heap throws.
 ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel& kernel,
                                   std::uint64_t start, std::span<const std::uint64_t> ends,
                                   std::size_t grain);

@@ -1,6 +1,7 @@
 #include "tools/cli/run_command.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -24,6 +25,7 @@
 #include "tools/cli/checkpoint.h"
 #include "tools/cli/interrupt.h"
 #include "tools/cli/memory_budget.h"
+#include "tools/cli/mpi_ranks.h"
 #include "tools/cli/progress.h"
 #include "tools/cli/run_output.h"
 #include "tools/cli/run_provenance.h"
@@ -156,6 +158,17 @@ struct RunLoop {
   Position start;                       // where the loop begins: 0, or a checkpoint's position
   engine::FilterStatistics before;      // a resumed run's phase timings before its checkpoint
   Checkpointing* checkpoint = nullptr;  // null: no checkpoints
+  // A particle set shared by ranks (null: one process): every rank runs this loop over the
+  // same events, and they stop together (drive).
+  parallel::Collective* group = nullptr;
+  bool stream_estimates = false;  // the scans' estimates are taken (every rank) for --stream
+};
+
+// One rank's state at an event, for the ranks to stop together.
+struct RankStatus {
+  int signal = 0;
+  int out_of_time = 0;
+  int failed = 0;
 };
 
 // `st` with the phase timings of the run before a resume added.
@@ -331,13 +344,32 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
   };
   for (std::uint64_t index = loop.start.events;; ++index) {
     const auto t0 = Clock::now();
-    if (const int signal = interrupt_signal(); signal != 0) {
+    int signal = interrupt_signal();
+    bool out_of_time = loop.options.max_seconds && std::chrono::duration<double>(t0 - start).count() >=
+                                                       *loop.options.max_seconds;
+    if (loop.group != nullptr) {
+      // Ranks stop at the same event: a rank leaving alone would hang the others' collective
+      // calls. The first signal in rank order, any rank out of time, any rank failed.
+      const RankStatus mine{signal, out_of_time ? 1 : 0, r.failure ? 1 : 0};
+      const std::vector<RankStatus> all = parallel::all_gather_value(*loop.group, mine);
+      signal = 0;
+      out_of_time = false;
+      for (std::size_t k = 0; k < all.size(); ++k) {
+        if (all[k].failed != 0) {
+          r.ended_by = "error";
+          if (!r.failure) r.failure = "rank " + std::to_string(k) + " failed (its error is above)";
+        }
+        if (signal == 0) signal = all[k].signal;
+        out_of_time = out_of_time || all[k].out_of_time != 0;
+      }
+      if (r.failure) break;
+    }
+    if (signal != 0) {
       r.interrupted_by = signal;
       stop(index, interrupt_name(signal));
       break;
     }
-    if (loop.options.max_seconds &&
-        std::chrono::duration<double>(t0 - start).count() >= *loop.options.max_seconds) {
+    if (out_of_time) {
       stop(index, "--max-seconds");
       break;
     }
@@ -398,9 +430,9 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             }
             loop.recorder.estimates(poses);
           }
-          if (loop.stream != nullptr) {
-            loop.stream->write(event.time, scans, filter.estimate(engine::EstimateMap::kSizeOnly),
-                               seconds_since(t0));
+          if (loop.stream_estimates) {
+            const engine::Estimate now = filter.estimate(engine::EstimateMap::kSizeOnly);
+            if (loop.stream != nullptr) loop.stream->write(event.time, scans, now, seconds_since(t0));
           }
           ++scans;
           if (loop.trace != nullptr && loop.trace->due()) {
@@ -429,7 +461,17 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
       // writes what it has; run_once raises the error after that.
       r.ended_by = "error";
       r.failure = e.what();
-      break;
+      if (loop.group == nullptr) break;
+      // Over ranks: a bad record or a numerical failure happens on every rank alike, and a file
+      // is written by rank 0 alone, outside the collective calls: the ranks stop together at
+      // the next event. Anything else (memory, a message that does not parse) may have struck
+      // this rank alone inside a collective call the others wait in: end them all.
+      if (dynamic_cast<const std::runtime_error*>(&e) == nullptr) {
+        std::fprintf(stderr, "fastslam: error: rank %d: %s; aborting every rank\n",
+                     loop.group->rank(), e.what());
+        loop.group->abort(1);
+      }
+      continue;
     }
     r.source_seconds += std::chrono::duration<double>(t1 - t0).count();
     r.filter_seconds += seconds_since(t1);
@@ -445,6 +487,21 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
   }
   r.filter_seconds += seconds_since(t_end);
   r.stats = with_timings_before(filter.statistics(), loop.before);
+  if (loop.group != nullptr) {
+    // The set's counts: each rank's particles' landmarks and its heap's nodes, summed.
+    using Counts = std::array<std::int64_t, 4>;
+    const Counts mine = {static_cast<std::int64_t>(r.stats.landmarks_created),
+                         static_cast<std::int64_t>(r.stats.landmarks_removed),
+                         r.stats.live_nodes, r.stats.live_bytes};
+    Counts sum{};
+    for (const Counts& c : parallel::all_gather_value(*loop.group, mine)) {
+      for (std::size_t k = 0; k < sum.size(); ++k) sum[k] += c[k];
+    }
+    r.stats.landmarks_created = static_cast<std::uint64_t>(sum[0]);
+    r.stats.landmarks_removed = static_cast<std::uint64_t>(sum[1]);
+    r.stats.live_nodes = sum[2];
+    r.stats.live_bytes = sum[3];
+  }
   if (loop.trace != nullptr) {
     try {
       loop.trace->close();
@@ -654,12 +711,53 @@ std::vector<std::string> run_inputs(const RunOptions& o) {
 }
 
 int run_simulation(const RunOptions& options) {
+  const Launch launch = launch_environment();
+  if (launch.launched && launch.size > 1 && !have_mpi()) {
+    throw std::runtime_error(
+        "this fastslam was built without MPI but was started as one of " +
+        std::to_string(launch.size) +
+        " processes (mpirun): each would run the whole run into the same files. Rebuild with "
+        "Open MPI (libopenmpi-dev) or run it without mpirun");
+  }
+  // Under mpirun the run's particles are spread over the ranks (run_once's group).
+  const Ranks ranks(launch.launched && launch.size > 1);
+  const std::shared_ptr<parallel::Collective> group =
+      ranks.size() > 1 ? ranks.collective() : nullptr;
   const InterruptHandlers handlers;
-  const nlohmann::json metrics = run_once(options);
+  const nlohmann::json metrics = run_once(options, {}, group.get());
   return metrics["status"] == "interrupted" ? 128 + interrupt_signal() : 0;
 }
 
-nlohmann::json run_once(const RunOptions& options, const std::function<void()>& accepted) {
+namespace {
+
+// Over ranks: what is refused, and what rank > 0 leaves to rank 0 (every output).
+RunOptions for_rank(const RunOptions& o, const parallel::Collective& group) {
+  auto refuse = [&](const std::string& what) {
+    throw std::invalid_argument(what + " is not available when a run's particles are spread over " +
+                                std::to_string(group.size()) +
+                                " ranks (mpirun); run it in one process");
+  };
+  if (o.filter.algorithm == engine::Algorithm::kEkf) refuse("--algorithm ekf (one state, no particles)");
+  if (!o.checkpoint.empty()) refuse("--checkpoint");
+  if (!o.resume.empty()) refuse("--resume");
+  if (!o.trace.empty()) refuse("--trace (its particle diagnostics are per process)");
+  if (o.data == "-") refuse("--data - (only rank 0 has the standard input)");
+  if (group.rank() == 0) return o;
+  RunOptions quiet = o;
+  quiet.out.clear();
+  quiet.stream.clear();
+  quiet.plot = "none";
+  quiet.progress = false;
+  quiet.quiet = true;
+  return quiet;
+}
+
+}  // namespace
+
+nlohmann::json run_once(const RunOptions& given, const std::function<void()>& accepted,
+                        parallel::Collective* group) {
+  if (group != nullptr && group->size() < 2) group = nullptr;
+  const RunOptions& options = group != nullptr ? for_rank(given, *group) : given;
   const std::vector<std::string> input_paths = run_inputs(options);
   const bool checkpointing = !options.checkpoint.empty();
   const bool resuming = !options.resume.empty();
@@ -740,6 +838,8 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
   RunLoop loop{resolved,     association, *source, truth, recorder, trace.get(),
                stream.get(), progress,    state,   {},    before,   nullptr};
   if (checkpointing) loop.checkpoint = &checkpoint;
+  loop.group = group;
+  loop.stream_estimates = !given.stream.empty();
   if (ekf) {
     engine::EkfSlam filter(config);
     drive(filter, loop, r);
@@ -758,6 +858,10 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
                    static_cast<unsigned long long>(loop.start.scans));
     }
     drive(*filter, loop, r);
+  } else if (group != nullptr) {
+    // The particles spread over the ranks; the filter gives every rank the one-process bits.
+    engine::Filter filter(config, std::shared_ptr<parallel::Collective>(group, [](auto*) {}));
+    drive(filter, loop, r);
   } else {
     engine::Filter filter(config);
     drive(filter, loop, r);
@@ -786,6 +890,7 @@ nlohmann::json run_once(const RunOptions& options, const std::function<void()>& 
   metrics["build"] = build_info_json();
   metrics["options"] = resolved_options_json(resolved, config, association.mode);
   metrics["memory_estimate_bytes"] = memory.bytes;
+  if (group != nullptr) metrics["ranks"] = group->size();
   if (options.hash_inputs) metrics["inputs"] = inputs;
   if (!options.sweep_run.empty()) metrics["sweep_run"] = nlohmann::json::parse(options.sweep_run);
   // With the scans streamed to standard output, everything else goes to standard error.

@@ -21,6 +21,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "engine/filter_config.h"
+#include "parallel/collective.h"
 #include "tools/datasets/sim_source.h"
 #include "tools/datasets/source.h"
 #include "tools/datasets/utias.h"
@@ -203,7 +204,13 @@ class RunFailed : public std::runtime_error {
 // settings are accepted (tools/cli/run_output.h); `accepted`, when given, is called then, so a
 // caller can do the same for files of its own. A refusal before that throws std::exception; a
 // failure after it throws RunFailed.
-nlohmann::json run_once(const RunOptions& options, const std::function<void()>& accepted = {});
+// `group` (a shared particle set over ranks, parallel/collective.h; every rank calls run_once
+// with the same options): the filter's particles are spread over the ranks; rank 0 reports and
+// writes the outputs, which are those of a run in one process (timings aside); the other ranks
+// write nothing. Refused over ranks (std::invalid_argument, on every rank before any work):
+// the EKF baseline, --checkpoint, --resume, --trace and standard input as --data.
+nlohmann::json run_once(const RunOptions& options, const std::function<void()>& accepted = {},
+                        parallel::Collective* group = nullptr);
 // The filter configuration run_once(options) builds: the source opened for its header and its
 // recommendations, the association resolved. For replaying a source through a Filter of one's
 // own (the Python module). Costs: opening the source (a log is read whole).

@@ -22,6 +22,7 @@
 
 #include "tools/cli/build_info.h"
 #include "tools/cli/interrupt.h"
+#include "tools/cli/mpi_ranks.h"
 #include "tools/cli/run_output.h"
 #include "tools/cli/run_provenance.h"
 #include "tools/cli/run_sweep.h"
@@ -32,113 +33,6 @@ namespace fastslam::tools {
 namespace {
 
 constexpr const char* kSweepFiles[] = {"sweep.json", "sweep.csv"};
-
-// A number from the environment, 0 when absent or not a number.
-int env_int(const char* name) {
-  const char* v = std::getenv(name);
-  return v == nullptr ? 0 : std::atoi(v);
-}
-
-// Whether a launcher (mpirun, srun) started this process, and how many it started.
-struct Launch {
-  bool launched = false;
-  int size = 1;        // 0 when the launcher does not say
-  int local_size = 1;  // processes of the job on this node
-};
-
-Launch launch_environment() {
-  Launch l;
-  if (std::getenv("OMPI_COMM_WORLD_SIZE") != nullptr) {
-    l.launched = true;
-    l.size = env_int("OMPI_COMM_WORLD_SIZE");
-    l.local_size = std::max(1, env_int("OMPI_COMM_WORLD_LOCAL_SIZE"));
-  } else if (std::getenv("PMIX_RANK") != nullptr || std::getenv("PMI_SIZE") != nullptr) {
-    l.launched = true;
-    l.size = env_int("PMI_SIZE");
-    l.local_size = std::max(1, env_int("MPI_LOCALNRANKS"));
-  }
-  return l;
-}
-
-// The process group: this process alone, or MPI_COMM_WORLD. Collective calls are made by the
-// main thread only; worker threads' exchanges with rank 0 go through `exchange_mutex`.
-class Ranks {
- public:
-  explicit Ranks(bool use_mpi) {
-#ifdef FASTSLAM_HAVE_MPI
-    if (use_mpi) {
-      int provided = 0;
-      MPI_Init_thread(nullptr, nullptr, MPI_THREAD_SERIALIZED, &provided);
-      mpi_ = true;
-      serialized_ = provided >= MPI_THREAD_SERIALIZED;
-      MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
-      MPI_Comm_size(MPI_COMM_WORLD, &size_);
-    }
-#else
-    (void)use_mpi;
-#endif
-  }
-  ~Ranks() {
-#ifdef FASTSLAM_HAVE_MPI
-    if (mpi_) MPI_Finalize();
-#endif
-  }
-  Ranks(const Ranks&) = delete;
-  Ranks& operator=(const Ranks&) = delete;
-
-  int rank() const { return rank_; }
-  int size() const { return size_; }
-  bool mpi() const { return mpi_; }
-  // Several threads of a rank may exchange with rank 0 (one at a time).
-  bool serialized() const { return serialized_; }
-
-  // Every rank's flag, on every rank.
-  std::vector<int> all_flags(int flag) const {
-    std::vector<int> flags(static_cast<std::size_t>(size_), flag);
-#ifdef FASTSLAM_HAVE_MPI
-    if (mpi_) MPI_Allgather(&flag, 1, MPI_INT, flags.data(), 1, MPI_INT, MPI_COMM_WORLD);
-#endif
-    return flags;
-  }
-  // Rank 0's text, on every rank.
-  std::string broadcast(std::string text) const {
-#ifdef FASTSLAM_HAVE_MPI
-    if (mpi_) {
-      long long n = static_cast<long long>(text.size());
-      MPI_Bcast(&n, 1, MPI_LONG_LONG, 0, MPI_COMM_WORLD);
-      text.resize(static_cast<std::size_t>(n));
-      MPI_Bcast(text.data(), static_cast<int>(n), MPI_CHAR, 0, MPI_COMM_WORLD);
-    }
-#endif
-    return text;
-  }
-  // Every rank's text of `width` bytes, on rank 0 (empty elsewhere).
-  std::vector<std::string> gather(const std::string& text, std::size_t width) const {
-    std::vector<std::string> out;
-    if (!mpi_) return {text};
-#ifndef FASTSLAM_HAVE_MPI
-    (void)width;
-#else
-    std::string padded = text;
-    padded.resize(width, ' ');
-    std::string all(rank_ == 0 ? width * static_cast<std::size_t>(size_) : 0, ' ');
-    MPI_Gather(padded.data(), static_cast<int>(width), MPI_CHAR, all.data(),
-               static_cast<int>(width), MPI_CHAR, 0, MPI_COMM_WORLD);
-    for (std::size_t r = 0; rank_ == 0 && r < static_cast<std::size_t>(size_); ++r) {
-      out.push_back(all.substr(r * width, width));
-    }
-#endif
-    return out;
-  }
-
-  std::mutex exchange_mutex;
-
- private:
-  bool mpi_ = false;
-  bool serialized_ = true;
-  int rank_ = 0;
-  int size_ = 1;
-};
 
 // JSON text, with bytes that are not UTF-8 (a path in a warning) replaced rather than thrown on.
 std::string dump(const nlohmann::json& j, int indent = -1) {
