@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <barrier>
+#include <chrono>
 #include <cstdlib>
 #include <string>
 
@@ -101,6 +102,27 @@ class LocalMember final : public Collective {
 };
 
 }  // namespace
+
+Bytes TimedCollective::all_gather(std::span<const std::byte> mine,
+                                  std::vector<std::size_t>* sizes) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Bytes all = inner_->all_gather(mine, sizes);
+  gather_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ++gathers;
+  gather_bytes += mine.size();
+  return all;
+}
+
+std::vector<Bytes> TimedCollective::exchange(const std::vector<Bytes>& to) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<Bytes> from = inner_->exchange(to);
+  exchange_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ++exchanges;
+  for (std::size_t d = 0; d < to.size(); ++d) {
+    if (static_cast<int>(d) != rank()) exchange_bytes += to[d].size();
+  }
+  return from;
+}
 
 LocalGroup::LocalGroup(int size) {
   if (size < 1) throw std::invalid_argument("LocalGroup: size must be >= 1");

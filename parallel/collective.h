@@ -14,6 +14,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <span>
@@ -71,6 +73,33 @@ class LocalGroup {
 
  private:
   std::shared_ptr<Shared> shared_;
+};
+
+// A Collective that forwards to another and counts its calls: wall seconds in each primitive
+// (waiting for the slowest rank included) and bytes this rank contributed or sent. For
+// benchmarks; the counters are plain members, read between calls.
+class TimedCollective final : public Collective {
+ public:
+  explicit TimedCollective(std::shared_ptr<Collective> inner) : inner_(std::move(inner)) {}
+  int rank() const noexcept override { return inner_->rank(); }
+  int size() const noexcept override { return inner_->size(); }
+  Bytes all_gather(std::span<const std::byte> mine, std::vector<std::size_t>* sizes) override;
+  std::vector<Bytes> exchange(const std::vector<Bytes>& to) override;
+  [[noreturn]] void abort(int code) override {
+    inner_->abort(code);
+    std::_Exit(code);  // not reached: the inner abort does not return
+  }
+
+  void reset() noexcept {
+    gathers = gather_bytes = exchanges = exchange_bytes = 0;
+    gather_seconds = exchange_seconds = 0.0;
+  }
+
+  std::uint64_t gathers = 0, gather_bytes = 0, exchanges = 0, exchange_bytes = 0;
+  double gather_seconds = 0.0, exchange_seconds = 0.0;
+
+ private:
+  std::shared_ptr<Collective> inner_;
 };
 
 // Typed forms of all_gather for trivially copyable values.

@@ -14,6 +14,7 @@
 #include "engine/filter_config.h"
 #include "tools/cli/build_info.h"
 #include "tools/cli/command_line.h"
+#include "tools/cli/mpi_ranks.h"
 #include "tools/cli/run_command.h"
 #include "tools/cli/run_sweep.h"
 #include "tools/cli/sweep_command.h"
@@ -94,7 +95,17 @@ int finish_and_run_scaling(ScalingCommand& c) {
   c.options.engine = c.engine == "linear" ? ScalingEngine::kLinear : ScalingEngine::kTree;
   c.options.filter.algorithm = engine::parse_enum<Algorithm>(c.algorithm);
   c.options.filter.association = engine::parse_enum<Association>(c.association);
-  return run_scaling_command(c.options, c.json, c.csv);
+  // Under mpirun every point's particles are spread over the ranks (docs/distributed.md).
+  const Launch launch = launch_environment();
+  if (launch.launched && launch.size > 1 && !have_mpi()) {
+    throw std::runtime_error("this fastslam was built without MPI but was started as one of " +
+                             std::to_string(launch.size) + " processes (mpirun)");
+  }
+  const Ranks ranks(launch.launched && launch.size > 1);
+  if (ranks.size() > 1) c.options.group = ranks.collective();
+  const int code = run_scaling_command(c.options, c.json, c.csv);
+  c.options.group.reset();  // before MPI is finalised
+  return code;
 }
 
 // `fastslam experiment lg-slam`: the convergence experiment of section 7.

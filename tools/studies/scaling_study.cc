@@ -1,6 +1,9 @@
 #include "tools/studies/scaling_study.h"
 
 #include <algorithm>
+#include <array>
+#include <memory>
+#include <optional>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -12,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/filter.h"
+#include "parallel/collective.h"
 #include "tools/io/atomic_file.h"
 #include "tools/sim/simulator.h"
 #include "tools/sim/world.h"
@@ -123,8 +127,14 @@ ScalingPoint run_scaling_point(const ScalingOptions& options, std::uint64_t land
     p.seconds_per_update = p.updates == 0 ? 0.0 : p.seconds / static_cast<double>(p.updates);
     return p;
   }
-  engine::Filter filter(config);
+  std::shared_ptr<parallel::TimedCollective> timed;
+  if (options.group != nullptr) timed = std::make_shared<parallel::TimedCollective>(options.group);
+  std::unique_ptr<engine::Filter> owned = timed != nullptr
+                                              ? std::make_unique<engine::Filter>(config, timed)
+                                              : std::make_unique<engine::Filter>(config);
+  engine::Filter& filter = *owned;
   filter.set_map(prior);
+  if (timed != nullptr) timed->reset();  // the updates only
   ScalingPoint p;
   p.landmarks = landmarks;
   p.particles = config.particles;
@@ -157,7 +167,50 @@ ScalingPoint run_scaling_point(const ScalingOptions& options, std::uint64_t land
   p.update_seconds = st.update_seconds;
   p.resample_seconds = st.resample_seconds;
   p.observe_wall_seconds = st.observe_wall_seconds;
+  if (timed != nullptr) {
+    p.ranks = options.group->size();
+    p.gather_seconds = timed->gather_seconds;
+    p.transfer_seconds = timed->exchange_seconds;
+    p.exchange_seconds = st.exchange_seconds;
+    p.resamples = st.resamples;
+    using Sent = std::array<std::uint64_t, 4>;
+    const Sent mine = {st.exchange_bytes, st.exchange_naive_bytes, st.exchange_copies,
+                       static_cast<std::uint64_t>(st.live_bytes)};
+    std::uint64_t live = 0;
+    for (const Sent& s : parallel::all_gather_value(*options.group, mine)) {
+      p.exchange_bytes += s[0];
+      p.exchange_naive_bytes += s[1];
+      p.exchange_copies += s[2];
+      live += s[3];
+    }
+    p.live_bytes = static_cast<std::int64_t>(live);
+  }
   return p;
+}
+
+TransportCost measure_transport(parallel::Collective& group) {
+  TransportCost cost;
+  const auto n = static_cast<std::size_t>(group.size());
+  for (std::uint64_t bytes = 1; bytes <= (std::uint64_t{1} << 22); bytes *= 4) {
+    std::vector<parallel::Bytes> to(n, parallel::Bytes(bytes, std::byte{1}));
+    std::vector<double> times;
+    for (int rep = 0; rep < 9; ++rep) {
+      (void)group.all_gather({});  // start together
+      const auto t0 = std::chrono::steady_clock::now();
+      (void)group.exchange(to);
+      times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    std::nth_element(times.begin(), times.begin() + 4, times.end());
+    // Rank 0's median, agreed on by every rank (rank 0's value).
+    const double median = parallel::all_gather_value(group, times[4]).front();
+    cost.samples.emplace_back(bytes, median);
+  }
+  // The latency from the smallest message, the per-byte cost from the largest beyond it (a least
+  // squares fit would let the large messages' noise swamp the latency).
+  cost.latency_seconds = cost.samples.front().second;
+  cost.seconds_per_byte = (cost.samples.back().second - cost.latency_seconds) /
+                          static_cast<double>(cost.samples.back().first);
+  return cost;
 }
 
 namespace {
@@ -197,6 +250,19 @@ nlohmann::json to_json(const ScalingPoint& p) {
           {"pose_error_m", p.pose_error},
           {"observe_wall_seconds", p.observe_wall_seconds},
           {"run_seconds", p.run_seconds},
+          {"ranks", p.ranks},
+          {"gather_seconds_per_update", p.gather_seconds / static_cast<double>(p.updates)},
+          {"transfer_seconds_per_update", p.transfer_seconds / static_cast<double>(p.updates)},
+          {"exchange_seconds_per_update", p.exchange_seconds / static_cast<double>(p.updates)},
+          {"resamples", p.resamples},
+          {"exchange_bytes_per_resampling",
+           p.resamples == 0 ? 0.0
+                            : static_cast<double>(p.exchange_bytes) / static_cast<double>(p.resamples)},
+          {"exchange_naive_bytes_per_resampling",
+           p.resamples == 0 ? 0.0
+                            : static_cast<double>(p.exchange_naive_bytes) /
+                                  static_cast<double>(p.resamples)},
+          {"exchange_copies", p.exchange_copies},
           {"seconds_per_phase",
            {{"predict", p.predict_seconds},
             {"associate", p.associate_seconds},
@@ -256,17 +322,28 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
       (void)LinearFastSlam(run.filter);  // refuses early
   }
   const engine::FilterConfig& f = options.filter;
-  std::printf("scaling: %s engine, %s, %s association, %llu updates per point, best of %llu\n",
+  // Over ranks every rank runs every point; rank 0 reports.
+  const bool speaks = options.group == nullptr || options.group->rank() == 0;
+  const auto say = [speaks](const char* format, auto... values) {
+    if (speaks) std::printf(format, values...);
+  };
+  std::optional<TransportCost> transport;
+  if (options.group != nullptr) {
+    transport = measure_transport(*options.group);
+    say("transport over %d ranks: %.2f us a message + %.3f ns a byte (exchange of 1 B .. 4 MiB)\n",
+        options.group->size(), 1e6 * transport->latency_seconds, 1e9 * transport->seconds_per_byte);
+  }
+  say("scaling: %s engine, %s, %s association, %llu updates per point, best of %llu\n",
               std::string(to_string(options.engine)).c_str(),
               std::string(engine::to_string(f.algorithm)).c_str(),
               std::string(engine::to_string(f.association)).c_str(),
               static_cast<unsigned long long>(options.updates),
               static_cast<unsigned long long>(options.repeats));
-  std::printf("%10s %7s %3s %8s %12s %12s %12s %10s %10s %10s %8s %8s\n", "landmarks", "M", "T",
+  say("%10s %7s %3s %8s %12s %12s %12s %10s %10s %10s %8s %8s\n", "landmarks", "M", "T",
               "obs/upd", "us/update", "cpu us/upd", "ns/part-upd", "ns/part-obs", "live MiB",
               "1 map MiB", "live/map", "error m");
   std::ofstream csv;
-  if (!csv_path.empty()) {
+  if (!csv_path.empty() && speaks) {
     csv.open(csv_path);
     if (!(csv << kCsvHeader << '\n')) throw std::runtime_error("cannot write " + csv_path);
   }
@@ -279,8 +356,7 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
         run.filter.threads = t;
         const ScalingPoint p = run_repeated(run, n);
         const double mib = 1.0 / (1 << 20);
-        std::printf(
-            "%10llu %7u %3u %8.1f %12.1f %12.1f %12.1f %10.1f %10.2f %10.2f %8.3f %8.2f\n",
+        say("%10llu %7u %3u %8.1f %12.1f %12.1f %12.1f %10.1f %10.2f %10.2f %8.3f %8.2f\n",
             static_cast<unsigned long long>(n), p.particles, p.threads,
             static_cast<double>(p.observations) / static_cast<double>(p.updates),
             1e6 * p.seconds_per_update, 1e6 * p.cpu_seconds / static_cast<double>(p.updates),
@@ -288,6 +364,15 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
             static_cast<double>(p.live_bytes) * mib, static_cast<double>(p.lower_bound_bytes) * mib,
             static_cast<double>(p.live_bytes) / static_cast<double>(p.lower_bound_bytes),
             p.pose_error);
+        if (p.ranks > 1) {
+          const double u = static_cast<double>(p.updates);
+          const double r = p.resamples == 0 ? 1.0 : static_cast<double>(p.resamples);
+          say("%10s %d ranks: per update %.1f us in reductions, %.1f us in the exchange (%.1f us "
+              "transfer); per resampling %.1f KiB sent, %.1f KiB by whole copies\n",
+              "", p.ranks, 1e6 * p.gather_seconds / u, 1e6 * p.exchange_seconds / u,
+              1e6 * p.transfer_seconds / u, static_cast<double>(p.exchange_bytes) / r / 1024,
+              static_cast<double>(p.exchange_naive_bytes) / r / 1024);
+        }
         std::fflush(stdout);
         points.push_back(to_json(p));
         if (csv.is_open() && !(csv << csv_line(run, p) << '\n')) {
@@ -298,9 +383,9 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
   }
   const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-  std::printf("study: %.1f s wall (setup included)\n", wall);
-  if (!json_path.empty()) {
-    const nlohmann::json out = {
+  say("study: %.1f s wall (setup included)\n", wall);
+  if (!json_path.empty() && speaks) {
+    nlohmann::json out = {
         {"config",
          {{"engine", to_string(options.engine)},
           {"algorithm", engine::to_string(f.algorithm)},
@@ -320,6 +405,14 @@ int run_scaling_command(const ScalingOptions& options, const std::string& json_p
           {"spacing_m", options.spacing},
           {"study_wall_seconds", wall}}},
         {"points", points}};
+    if (transport) {
+      nlohmann::json samples = nlohmann::json::array();
+      for (const auto& [bytes, seconds] : transport->samples) samples.push_back({bytes, seconds});
+      out["transport"] = {{"ranks", options.group->size()},
+                          {"latency_seconds", transport->latency_seconds},
+                          {"seconds_per_byte", transport->seconds_per_byte},
+                          {"samples_bytes_seconds", samples}};
+    }
     write_file_atomically(json_path, out.dump(2) + '\n');
   }
   return 0;

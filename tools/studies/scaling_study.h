@@ -11,11 +11,13 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "engine/filter_config.h"
+#include "parallel/collective.h"
 
 namespace fastslam::tools {
 
@@ -36,6 +38,9 @@ struct ScalingOptions {
                                 // ever adds time), every run's time is kept
   double spacing = 10.0;        // m per landmark
   engine::FilterConfig filter;  // algorithm, association, seed, ... (particles, threads: above)
+  // The ranks sharing each point's particle set (`fastslam bench scaling` under mpirun; every
+  // rank runs the study; rank 0 reports). Null: one process.
+  std::shared_ptr<parallel::Collective> group;
 };
 
 struct ScalingPoint {
@@ -57,7 +62,26 @@ struct ScalingPoint {
          resample_seconds = 0.0;
   double observe_wall_seconds = 0.0;  // wall time inside observe (tree engine; linear: 0)
   std::vector<double> run_seconds;    // every repeat's `seconds` (run_scaling_command)
+  // Over ranks (ScalingOptions::group; rank 0's times): wall seconds in the set's reductions
+  // (all_gather: weights, best particle, trajectory) and in the exchange's transfer (waiting
+  // for the slowest rank included), and in the whole exchange (packing, transfer, unpacking
+  // and the indices' rebuild); the resamplings; every rank's bytes sent in them, and what
+  // sending each copy with its whole map would have cost.
+  int ranks = 1;
+  double gather_seconds = 0.0, transfer_seconds = 0.0, exchange_seconds = 0.0;
+  std::uint64_t resamples = 0, exchange_bytes = 0, exchange_naive_bytes = 0, exchange_copies = 0;
 };
+
+// The transport's costs between the group's ranks (each rank sending one message of s bytes to
+// every other at once, as the resampling exchange does): the median wall time of an exchange,
+// modelled as latency + s * seconds_per_byte: the latency that of 1 B, the per-byte cost that
+// of 4 MiB beyond it; the samples from 1 B to 4 MiB are kept.
+struct TransportCost {
+  double latency_seconds = 0.0;
+  double seconds_per_byte = 0.0;
+  std::vector<std::pair<std::uint64_t, double>> samples;  // (bytes, median seconds)
+};
+TransportCost measure_transport(parallel::Collective& group);
 
 // Throws std::invalid_argument for N = 0, zero updates, an invalid filter config, or (kLinear)
 // N above linear_max_landmarks or a config the baseline does not support.
