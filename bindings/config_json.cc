@@ -26,7 +26,7 @@ using Json = nlohmann::ordered_json;
 using engine::FilterConfig;
 
 // A field added to FilterConfig changes its size: add its key to visit_config, then update this.
-static_assert(sizeof(FilterConfig) == 344, "FilterConfig changed: update visit_config's keys");
+static_assert(sizeof(FilterConfig) == 360, "FilterConfig changed: update visit_config's keys");
 
 // FilterConfig's keys in struct order, for the reader and the writer alike, so the two cannot
 // drift apart. `C` is FilterConfig or const FilterConfig.
@@ -87,6 +87,10 @@ void visit_config(C& c, V& v) {
     e.field("joint_compatibility", c.ekf.joint_compatibility);
   });
   v.field("initial_pose", c.initial_pose, 3);  // x, y, theta; v and omega (kappa) optional
+  v.object("detection", [&](V& d) {
+    d.field("probability", c.detection.probability);
+    d.field("clutter_density", c.detection.clutter_density);
+  });
 }
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) {

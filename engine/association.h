@@ -19,6 +19,12 @@
 //     ln(p0 + sum of the free p_jn), the normaliser, which is the importance weight of a draw
 //     from p_jn / normaliser (the chosen p alone would bias toward unlikely draws).
 //
+// With a detection model (filter_config.h DetectionConfig) "no landmark" is scored per
+// observation: a new landmark or a false alarm, against a landmark that had to be detected,
+// ln u_j = ln((p0 + kappa(z_j)) / P_D) (`log_unassociated`); the overloads taking a span use it
+// in place of ln p0, in the choice and in the weight. The common factor P_D^Z of the scan is
+// left out of every particle's weight alike. u_j >= p0, so a search cut at ln p0 stays valid.
+//
 // Ownership: spans borrowed for the call. Thread safety: pure functions (DAS advances the
 // stream it is given). Costs: O(C (log C + Z)) for C candidates and Z observations, and O(Z)
 // scratch in the caller's vector (no allocation once it has grown).
@@ -28,6 +34,7 @@
 #include <span>
 #include <vector>
 
+#include "engine/filter_config.h"
 #include "memory/landmark_tree.h"
 #include "parallel/random_stream.h"
 
@@ -49,11 +56,24 @@ inline constexpr std::int64_t kNewLandmark = -1;
 // weight factor.
 double associate_maximum_likelihood(std::span<AssociationCandidate> candidates,
                                     double log_new_landmark, std::span<std::int64_t> assignment);
+// The same with observation j's "no landmark" scored log_unassociated[j] (size: the
+// observations).
+double associate_maximum_likelihood(std::span<AssociationCandidate> candidates,
+                                    std::span<const double> log_unassociated,
+                                    std::span<std::int64_t> assignment);
 
 // Data association sampling with mutual exclusion, drawing from `stream`. Reorders `candidates`;
 // `taken` is scratch. Returns the log weight factor.
 double associate_sampling(std::span<AssociationCandidate> candidates, double log_new_landmark,
                           parallel::RandomStream& stream, std::span<std::int64_t> assignment,
                           std::vector<memory::Slot>& taken);
+// The same with observation j's "no landmark" scored log_unassociated[j].
+double associate_sampling(std::span<AssociationCandidate> candidates,
+                          std::span<const double> log_unassociated, parallel::RandomStream& stream,
+                          std::span<std::int64_t> assignment, std::vector<memory::Slot>& taken);
+
+// ln u = ln((p0 + clutter_density * range) / P_D): the score of "no landmark" for an
+// observation at `range` (m). O(1).
+double log_unassociated(double log_new_landmark, const DetectionConfig& detection, double range);
 
 }  // namespace fastslam::engine

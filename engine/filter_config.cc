@@ -65,6 +65,10 @@ void validate(const FilterConfig& c) {
   require(c.threads <= parallel::ParticleKernel::kMaxThreads,
           "threads must be at most " + std::to_string(parallel::ParticleKernel::kMaxThreads));
   for (double v : c.initial_pose) require(std::isfinite(v), "initial_pose must be finite");
+  require(c.detection.probability > 0 && c.detection.probability <= 1,
+          "detection.probability must be in (0, 1]");
+  require(std::isfinite(c.detection.clutter_density) && c.detection.clutter_density >= 0,
+          "detection.clutter_density must be finite and >= 0");
 }
 
 }  // namespace fastslam::engine

@@ -110,6 +110,18 @@ struct AssociationConfig {
   double search_scale = 1.5;
 };
 
+// The sensor's detection model for unknown association (ml, das): each landmark in view is
+// detected with `probability`, and false alarms arrive as a Poisson process of
+// `clutter_density` per m² of the footprint per scan. An observation that takes no landmark is
+// then a new landmark (p0) or a false alarm, and a landmark explains it only by being detected,
+// so "no landmark" scores ln((p0 + kappa(z)) / P_D) against a candidate's ln p (docs/
+// association.md), where kappa(z) = clutter_density * r is the false-alarm density in range
+// and bearing (polar area element r dr dphi). The defaults (1, 0) leave ln p0 alone, bit for bit.
+struct DetectionConfig {
+  double probability = 1.0;      // P_D, in (0, 1]
+  double clutter_density = 0.0;  // false alarms per m² per scan, >= 0; 0: no clutter model
+};
+
 // EKF-SLAM (Algorithm::kEkf) with maximum-likelihood association: gates on the squared
 // Mahalanobis distance d2 = v^T S^-1 v of an observation to a landmark (chi-square with 2 degrees
 // of freedom when the association is right). An observation takes the nearest landmark (smallest
@@ -152,6 +164,8 @@ struct FilterConfig {
   // The initial pose of every particle (x, y, theta; v, omega for kBrownian; v, kappa for
   // kBrownianCurvature).
   double initial_pose[5] = {0, 0, 0, 0, 0};
+  // Last, so that a saved state's earlier fields keep their offsets (engine/internal/state_io).
+  DetectionConfig detection;  // FastSLAM with ml or das (the EKF baseline ignores it)
 };
 
 // Throws std::invalid_argument naming the first unusable field (zero particles, a non-positive

@@ -53,7 +53,9 @@ struct SearchInput {
   Eigen::Matrix2d r;
   double gate = 0.0;          // Mahalanobis^2 gate
   double search_scale = 1.0;  // disc radius factor
-  double log_p0 = 0.0;        // ln p0, the likelihood of a new landmark
+  // ln p0, the likelihood of a new landmark; with a detection model every observation's "no
+  // landmark" score is at least this (association.h), so the cut below stays safe.
+  double log_p0 = 0.0;
   double variance_bound = 0.0;
 };
 

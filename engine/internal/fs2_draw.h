@@ -2,8 +2,10 @@
 // association chose are folded into the proposal in scan order (eq. 61), then the state is drawn
 // once from it (engine/proposal.h draw_state: without odometry the velocities keep their Gaussian
 // given the pose). With none chosen the draw is from the motion prior, as eq. 68 for new
-// landmarks. The returned `folded` is the chain of the folds' log-likelihoods plus ln p0 per new
-// landmark: the weight factor under maximum likelihood (as with known ids).
+// landmarks. The returned `folded` is the chain of the folds' log-likelihoods plus observation
+// j's "no landmark" score, log_unassociated[j] (ln p0, or ln u_j with a detection model:
+// association.h), per new landmark: the weight factor under maximum likelihood (as with known
+// ids).
 // Thread safety: reads the map; a pure function otherwise. Costs: O(Z (log N + N^3)) for Z
 // observations; no allocation.
 #pragma once
@@ -27,20 +29,21 @@ template <int N>
 struct Fs2Draw {
   Eigen::Matrix<double, N, 1> state;  // the drawn state, heading wrapped
   Eigen::Matrix<double, N, N> rest;   // the covariance that outlives the scan (draw_state)
-  double folded = 0.0;                // sum of the folds' ln-likelihoods and ln p0 per new one
+  double folded = 0.0;  // sum of the folds' ln-likelihoods and the new ones' log_unassociated
 };
 
 // `chosen[j]` is observation j's slot or kNewLandmark; `normals` N standard normals.
 template <int N>
-Fs2Draw<N> fold_and_draw(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, double log_p0,
-                         const PoseGaussian<N>& prior, const memory::LandmarkTree& map,
+Fs2Draw<N> fold_and_draw(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
+                         std::span<const double> log_unassociated, const PoseGaussian<N>& prior,
+                         const memory::LandmarkTree& map,
                          const std::vector<PlannedObservation>& scan,
                          std::span<const std::int64_t> chosen, const double* normals) {
   PoseGaussian<N> proposal = prior;
   Fs2Draw<N> out;
   for (std::size_t j = 0; j < scan.size(); ++j) {
     if (chosen[j] == kNewLandmark) {
-      out.folded += log_p0;
+      out.folded += log_unassociated[j];
       continue;
     }
     const LandmarkGaussian lm = to_gaussian(map.at(static_cast<memory::Slot>(chosen[j])));

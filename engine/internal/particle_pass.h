@@ -112,6 +112,9 @@ class ParticlePass final : public Pass {
       }
     }
     const PassInputs in = inputs(scan_step);
+    if constexpr (!kKnown) {
+      if (scan != nullptr) score_unassociated(*scan);
+    }
     if (in.record) recorder_.begin(s_.store.log_weight(), queued);
     block_seconds_.assign(blocks.tasks, 0.0);
     kernel_.for_each_block(
@@ -204,19 +207,27 @@ class ParticlePass final : public Pass {
                                   scratch.search);
     scratch.assignment.resize(scan.size());
     const std::span<std::int64_t> chosen(scratch.assignment);
+    // Without a detection model every observation's "no landmark" score is ln p0, and the
+    // scalar overloads keep the sums in their original order (bit-identical results).
     const double log_p0 = s_.config.log_new_landmark;
+    const std::span<const double> unassociated(log_unassociated_);
     double log_w;
     if constexpr (kMl) {
-      log_w = associate_maximum_likelihood(scratch.search.candidates, log_p0, chosen);
+      log_w = detection_model_
+                  ? associate_maximum_likelihood(scratch.search.candidates, unassociated, chosen)
+                  : associate_maximum_likelihood(scratch.search.candidates, log_p0, chosen);
     } else {
       parallel::RandomStream stream({s_.config.seed, in.scan_step,
                                      s_.first_particle + static_cast<std::uint32_t>(i),
                                      parallel::Purpose::kAssociation});
-      log_w = associate_sampling(scratch.search.candidates, log_p0, stream, chosen, scratch.taken);
+      log_w = detection_model_ ? associate_sampling(scratch.search.candidates, unassociated, stream,
+                                                    chosen, scratch.taken)
+                               : associate_sampling(scratch.search.candidates, log_p0, stream,
+                                                    chosen, scratch.taken);
     }
     if constexpr (kFs2) {
       const Fs2Draw<N> d =
-          fold_and_draw<N>(s_.sensor, s_.r, log_p0, prior, map, scan, chosen, draw);
+          fold_and_draw<N>(s_.sensor, s_.r, unassociated, prior, map, scan, chosen, draw);
       // Under ML the weight is the chain of the folds' terms; under DAS it stays the product
       // of the normalisers.
       if constexpr (kMl) log_w = d.folded;
@@ -230,6 +241,20 @@ class ParticlePass final : public Pass {
     }
     s_.store.log_weight()[i] += log_w;
     record(scratch.search.candidates, chosen, i);
+  }
+
+  // Each observation's score of "no landmark" for this scan, the same in every particle: ln p0,
+  // or with a detection model ln((p0 + kappa(z)) / P_D) (association.h). O(Z), once per scan,
+  // before the blocks run.
+  void score_unassociated(const std::vector<PlannedObservation>& scan) {
+    const FilterConfig& c = s_.config;
+    detection_model_ = c.detection.probability != 1.0 || c.detection.clutter_density != 0.0;
+    log_unassociated_.resize(scan.size());
+    for (std::size_t j = 0; j < scan.size(); ++j) {
+      log_unassociated_[j] = detection_model_
+                                 ? log_unassociated(c.log_new_landmark, c.detection, scan[j].z[0])
+                                 : c.log_new_landmark;
+    }
   }
 
   // Particle i's row of the scan report (scan_report.h): its choices, and per observation the
@@ -260,6 +285,9 @@ class ParticlePass final : public Pass {
   parallel::ThreadScratch<PassScratch> scratch_;
   // The work of the last pass, per block (decides heavy_).
   std::vector<double> block_seconds_;
+  // This scan's "no landmark" scores (score_unassociated); every block reads them.
+  std::vector<double> log_unassociated_;
+  bool detection_model_ = false;
   MotionNormalsAhead ahead_;  // FastSLAM 1.0 only; last: destroyed, so waited for, first
 };
 

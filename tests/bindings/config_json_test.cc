@@ -201,7 +201,9 @@ TEST(ConfigJson, WritesEveryKey) {
                                           "ekf.gate_accept",
                                           "ekf.gate_new",
                                           "ekf.joint_compatibility",
-                                          "initial_pose"};
+                                          "initial_pose",
+                                          "detection.probability",
+                                          "detection.clutter_density"};
   EXPECT_EQ(paths, expected);
 }
 

@@ -6,7 +6,10 @@
 //    equals the per-observation argmax (brute force); the order candidates come in is irrelevant,
 //    and so are the candidates below ln p0 (the filter drops them before the choice);
 //  - sampling: choice frequencies over many keyed streams match p_jn / (p0 + sum p) within 5
-//    binomial standard deviations; mutual exclusion holds; the weight is the log normaliser.
+//    binomial standard deviations; mutual exclusion holds; the weight is the log normaliser;
+//  - the detection model (clutter, P_D): the score of "no landmark" against its closed form; ML
+//    with per-observation scores against the brute-force argmax; DAS's frequencies against the
+//    model's posterior enumerated over landmark / new / false alarm.
 #include "engine/association.h"
 
 #include <algorithm>
@@ -216,6 +219,113 @@ TEST(Sampling, IsDeterministicPerStreamAndIgnoresInputOrder) {
     const double wb = associate_sampling(shuffled, -8.0, s2, b, taken);
     EXPECT_EQ(a, b);
     EXPECT_EQ(wa, wb);
+  }
+}
+
+// The detection model's score of "no landmark": ln((p0 + kappa r) / P_D), by the closed form,
+// also where p0 is far below a double's range; the defaults give ln p0 itself, bit for bit.
+TEST(DetectionModel, UnassociatedScoreIsTheClosedForm) {
+  EXPECT_EQ(log_unassociated(-6.0, DetectionConfig{}, 12.0), -6.0);
+  const DetectionConfig d{0.8, 2.0 / 1413.0};
+  for (const double log_p0 : {-9.0, -6.0, -3.0, 0.0}) {
+    for (const double r : {0.5, 5.0, 15.0, 30.0}) {
+      const double expected = std::log((std::exp(log_p0) + d.clutter_density * r) / 0.8);
+      EXPECT_NEAR(log_unassociated(log_p0, d, r), expected, 1e-12) << log_p0 << " " << r;
+    }
+  }
+  EXPECT_NEAR(log_unassociated(-900.0, d, 10.0), std::log(d.clutter_density * 10.0 / 0.8), 1e-12);
+  EXPECT_NEAR(log_unassociated(-6.0, DetectionConfig{0.5, 0.0}, 10.0), -6.0 - std::log(0.5), 1e-12);
+}
+
+// Per-observation scores against brute force: on scans where no two observations share a
+// candidate, ML is the per-observation argmax against that observation's own score, and the
+// weight the sum of the choices' scores; with one score for all, the span overload agrees with
+// the scalar one.
+TEST(DetectionModel, MaximumLikelihoodWithPerObservationScoresMatchesBruteForce) {
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const std::uint32_t z = 1 + static_cast<std::uint32_t>(rng() % 8);
+    Candidates c;
+    std::vector<double> scores(z);
+    memory::Slot next = 0;
+    for (std::uint32_t j = 0; j < z; ++j) {
+      scores[j] = -9.0 + 8.0 * u(rng);
+      const int k = static_cast<int>(rng() % 4);
+      for (int n = 0; n < k; ++n) c.push_back({j, next++, -12.0 + 12.0 * u(rng)});
+    }
+    std::vector<std::int64_t> expected(z, kNewLandmark);
+    double expected_w = 0.0;
+    for (std::uint32_t j = 0; j < z; ++j) {
+      double best = scores[j];
+      for (const AssociationCandidate& a : c) {
+        if (a.observation == j && a.log_likelihood >= best) {
+          best = a.log_likelihood;
+          expected[j] = a.slot;
+        }
+      }
+      expected_w += best;
+    }
+    Candidates work = c;
+    std::vector<std::int64_t> assignment(z, 123);
+    const double log_w = associate_maximum_likelihood(work, scores, assignment);
+    EXPECT_EQ(assignment, expected) << "trial " << trial;
+    EXPECT_NEAR(log_w, expected_w, 1e-9) << "trial " << trial;
+
+    const std::vector<double> same(z, -6.0);
+    Candidates a = c, b = c;
+    std::vector<std::int64_t> with_span(z), with_scalar(z);
+    const double wa = associate_maximum_likelihood(a, same, with_span);
+    const double wb = associate_maximum_likelihood(b, -6.0, with_scalar);
+    EXPECT_EQ(with_span, with_scalar);
+    EXPECT_NEAR(wa, wb, 1e-9);
+  }
+}
+
+// The draw against the model's posterior by enumeration: an observation is landmark n
+// (detected, P_D p_n), a new landmark (p0) or a false alarm (kappa r), so P(n) = P_D p_n / S and
+// P(no landmark) = (p0 + kappa r) / S, S = P_D sum p + p0 + kappa r. DAS with the scores of
+// log_unassociated draws with these frequencies, per observation with its own range, and its
+// weight is the sum of ln(S / P_D).
+TEST(DetectionModel, SamplingFrequenciesMatchTheModelPosterior) {
+  const DetectionConfig d{0.8, 0.002};
+  const double log_p0 = std::log(0.01);
+  const double ranges[2] = {4.0, 25.0};
+  const Candidates c = {{0, 7, std::log(0.05)}, {0, 3, std::log(0.02)}, {1, 9, std::log(0.03)}};
+  const std::vector<double> scores = {log_unassociated(log_p0, d, ranges[0]),
+                                      log_unassociated(log_p0, d, ranges[1])};
+  // The model's posterior, by enumeration over each observation's hypotheses.
+  std::map<std::int64_t, double> posterior[2];
+  double expected_w = 0.0;
+  for (std::uint32_t j = 0; j < 2; ++j) {
+    double total = std::exp(log_p0) + d.clutter_density * ranges[j];
+    posterior[j][kNewLandmark] = total;
+    for (const AssociationCandidate& a : c) {
+      if (a.observation != j) continue;
+      posterior[j][a.slot] = d.probability * std::exp(a.log_likelihood);
+      total += posterior[j][a.slot];
+    }
+    for (auto& [slot, p] : posterior[j]) p /= total;
+    expected_w += std::log(total / d.probability);
+  }
+  const int draws = 40000;
+  std::map<std::int64_t, int> count[2];
+  std::vector<memory::Slot> taken;
+  for (int k = 0; k < draws; ++k) {
+    parallel::RandomStream stream(
+        {8, 3, static_cast<std::uint32_t>(k), parallel::Purpose::kAssociation});
+    Candidates work = c;
+    std::vector<std::int64_t> assignment(2);
+    const double log_w = associate_sampling(work, scores, stream, assignment, taken);
+    ASSERT_NEAR(log_w, expected_w, 1e-12);
+    ++count[0][assignment[0]];
+    ++count[1][assignment[1]];
+  }
+  for (int j = 0; j < 2; ++j) {
+    for (const auto& [slot, p] : posterior[j]) {
+      const double sd = std::sqrt(draws * p * (1 - p));
+      EXPECT_NEAR(count[j][slot], draws * p, 5 * sd) << "observation " << j << " slot " << slot;
+    }
   }
 }
 

@@ -447,6 +447,9 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   if (given("--sigma-u0")) o.model.sigma_control0 = w.sigma_control0;
   if (given("--sigma-u1")) o.model.sigma_control1 = w.sigma_control1;
   if (given("--max-range")) o.model.max_range = w.max_range;
+  if (given("--filter-clutter-density")) o.model.clutter_density = w.clutter_density;
+  if (given("--filter-detection-probability"))
+    o.model.detection_probability = w.detection_probability;
   if (given("--field-of-view-deg"))
     o.model.field_of_view = w.field_of_view_deg * std::numbers::pi / 180;
   if (given("--max-steps")) o.max_steps = w.max_steps;
@@ -533,6 +536,15 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "probability that the simulated sensor detects a landmark in view")
       ->check(number_in(0.0, 1.0))
       ->capture_default_str();
+  cmd.add_option("--filter-clutter-density", w.clutter_density,
+                 "false alarms per m² per scan the association expects: 'no landmark' scores "
+                 "ln((p0 + density * range) / P_D) (ml, das; default: the simulator's --clutter "
+                 "over its footprint's area, else 0, which leaves ln p0 as it is)")
+      ->check(non_negative_number());
+  cmd.add_option("--filter-detection-probability", w.detection_probability,
+                 "P_D, the probability the association expects a landmark in view to be "
+                 "detected (ml, das; default: the simulator's --detection-probability, else 1)")
+      ->check(number_in(1e-9, 1.0));
   cmd.add_option("--ekf-gate-accept", f.ekf.gate_accept,
                  "ekf with ml: associate when the squared Mahalanobis distance is below this")
       ->check(positive_number())

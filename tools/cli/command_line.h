@@ -35,6 +35,7 @@ struct RunWords {
   std::string scheme{engine::enum_name(engine::FilterConfig{}.resample.scheme)};
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
   double max_range = 0, field_of_view_deg = 0;
+  double clutter_density = 0, detection_probability = 0;  // the filter's (ml, das)
   std::uint64_t max_steps = 0;
   std::string seeds;
   double match_radius = 0, rpe_delta = 0;

@@ -663,6 +663,15 @@ engine::FilterConfig filter_config(const RunOptions& o, const LogHeader& h) {
   if (m.sigma_bearing) config.sensor.sigma_bearing = *m.sigma_bearing;
   if (m.max_range) config.sensor.max_range = *m.max_range;
   if (m.field_of_view) config.sensor.field_of_view = *m.field_of_view;
+  if (o.source == "sim") {
+    // The simulator's false alarms and misses, as its noises are the filter's by default.
+    config.detection.clutter_density = clutter_density(o.sim);
+    if (o.sim.detection_probability > 0) {
+      config.detection.probability = o.sim.detection_probability;
+    }
+  }
+  if (m.clutter_density) config.detection.clutter_density = *m.clutter_density;
+  if (m.detection_probability) config.detection.probability = *m.detection_probability;
   if (m.sigma_control0) config.motion.sigma_control[0] = *m.sigma_control0;
   if (m.sigma_control1) config.motion.sigma_control[1] = *m.sigma_control1;
   for (int k = 0; k < 5; ++k) config.initial_pose[k] = k < 3 ? h.start_pose[k] : 0.0;

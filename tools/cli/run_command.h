@@ -37,11 +37,13 @@ inline constexpr double kNoOdometrySigmaV = 0.15;      // m/s per step
 inline constexpr double kNoOdometrySigmaOmega = 0.05;  // rad/s per step
 inline constexpr double kNoOdometrySigmaKappa = 0.01;  // 1/m per step
 
-// Filter models that replace the source's (a log header's, or the simulator's): noises, and
-// the sensor's range (m) and field of view (rad, centred ahead).
+// Filter models that replace the source's (a log header's, or the simulator's): noises, the
+// sensor's range (m) and field of view (rad, centred ahead), and its detection model.
 struct ModelOverrides {
   std::optional<double> sigma_range, sigma_bearing, sigma_control0, sigma_control1;
   std::optional<double> max_range, field_of_view;
+  // The detection model (engine::DetectionConfig; unknown association only).
+  std::optional<double> clutter_density, detection_probability;
 };
 
 // --association: the engine's modes, "mixed" (labelled detections by their ids, unlabelled

@@ -99,6 +99,8 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"sigma-u1", config.motion.sigma_control[1]},
       {"max-range", config.sensor.max_range},
       {"field-of-view-deg", config.sensor.field_of_view * kDegrees},
+      {"filter-clutter-density", config.detection.clutter_density},
+      {"filter-detection-probability", config.detection.probability},
       {"initial-heading-deg", config.initial_pose[2] * kDegrees},
       // Execution.
       {"seed", config.seed},

@@ -146,6 +146,12 @@ void Simulator::check_progress(double d2) {
   throw std::runtime_error(message);
 }
 
+double clutter_density(const SimConfig& config) {
+  const double area = 0.5 * config.field_of_view *
+                      (config.max_range * config.max_range - config.min_range * config.min_range);
+  return area > 0 ? config.clutter_rate / area : 0.0;
+}
+
 void Simulator::observe(SimStep& step) {
   index_.within(pose_.x, pose_.y, config_.max_range, visible_);
   parallel::RandomStream noise({seed_, step_, kSensorStream, parallel::Purpose::kSimulator});

@@ -55,6 +55,10 @@ struct TruePose {
   double theta = 0.0;
 };
 
+// The false alarms per m² per scan: clutter_rate over the footprint's area (the annular sector
+// between min_range and max_range inside the field of view, where they are drawn uniformly).
+double clutter_density(const SimConfig& config);
+
 // SimObservation::landmark of a false alarm.
 inline constexpr std::uint32_t kClutter = 0xFFFFFFFFu;
 

@@ -47,8 +47,9 @@ struct World {
 TEST(Fs2DrawTest, NoChoiceDrawsFromThePrior) {
   World w;
   const std::vector<std::int64_t> none(w.scan.size(), kNewLandmark);
+  const std::vector<double> log_p0(w.scan.size(), -7.0);
   const Fs2Draw<5> d =
-      fold_and_draw<5>(w.sensor, w.r, -7.0, w.prior, w.map, w.scan, none, w.normals);
+      fold_and_draw<5>(w.sensor, w.r, log_p0, w.prior, w.map, w.scan, none, w.normals);
   Eigen::Matrix<double, 5, 5> rest;
   const Eigen::Matrix<double, 5, 1> s = draw_state<5>(w.prior, w.normals, rest);
   EXPECT_EQ(d.state, s);
@@ -58,8 +59,9 @@ TEST(Fs2DrawTest, NoChoiceDrawsFromThePrior) {
 
 TEST(Fs2DrawTest, FoldsMatchTheLaneKernels) {
   World w;
+  const std::vector<double> log_p0(w.scan.size(), -7.0);
   const Fs2Draw<5> d =
-      fold_and_draw<5>(w.sensor, w.r, -7.0, w.prior, w.map, w.scan, w.chosen, w.normals);
+      fold_and_draw<5>(w.sensor, w.r, log_p0, w.prior, w.map, w.scan, w.chosen, w.normals);
   // One lane (padded to a group) through the lane kernels.
   constexpr std::size_t kLanes = 8;
   std::vector<double> columns((5 + 15 + 6) * kLanes, 0.0);
