@@ -68,7 +68,9 @@ ACCURACY = [
       "gospa_aligned_false", "gospa_aligned_missed"],
      "`--clutter 2 --detection-probability 0.8`: a Poisson number of false alarms per scan "
      "(mean 2) uniform over the sensor's footprint, and each true landmark in view detected with "
-     "probability 0.8. Pose RMSE after the best rigid fit, against dead reckoning's; landmarks: "
+     "probability 0.8; the filter weighs \"no landmark\" against that false-alarm density and "
+     "detection probability (docs/association.md, \"False alarms and missed detections: the detection model\"). "
+     "Pose RMSE after the best rigid fit, against dead reckoning's; landmarks: "
      "in the most likely particle's reported map (30 true ones are observed); false and missed: "
      "GOSPA's unassigned estimated and true landmarks (cutoff 5 m) after the path's alignment. "
      "The rows \"every landmark reported\" set `--existence-confirm-at -1e9`, so provisional "
@@ -196,10 +198,13 @@ def run_seeds(fastslam, args, seeds):
             return json.load(f)["per_seed"]
 
 
-def measure_accuracy(fastslam, jobs):
-    """Each row is one `--seeds` sweep, its seeds split into `jobs` sweeps run at once."""
-    tables = {}
+def measure_accuracy(fastslam, jobs, only=None, tables=None):
+    """Each row is one `--seeds` sweep, its seeds split into `jobs` sweeps run at once. `only`:
+    the ids of the tables to measure; the others are kept from `tables`."""
+    tables = dict(tables or {})
     for table_id, _, keys, _, rows in ACCURACY:
+        if only and table_id not in only:
+            continue
         measured = []
         chunks = [SEEDS[i::jobs] for i in range(jobs) if SEEDS[i::jobs]]
         for label, args in rows:
@@ -400,6 +405,9 @@ def main():
     parser.add_argument("--fasterslam", help="FasterSLAM's built src/ folder (whole-process)")
     parser.add_argument("--build", default=os.path.join(ROOT, "build", "release"))
     parser.add_argument("--jobs", type=int, default=2, help="seeds run at once (accuracy)")
+    parser.add_argument("--tables", help="with --run accuracy: only these tables, comma "
+                        "separated (" + ", ".join(t[0] for t in ACCURACY) + "); the others "
+                        "are kept as measured")
     parser.add_argument("--repetitions", type=int, default=5, help="benchmark repetitions")
     parser.add_argument("--json", default=os.path.join(ROOT, "docs", "results.json"))
     parser.add_argument("--out", default=os.path.join(ROOT, "docs", "results.md"))
@@ -413,7 +421,9 @@ def main():
     stamp = {"date": datetime.date.today().isoformat(), "machine": machine()}
     if opts.run in ("accuracy", "all"):
         fastslam = os.path.join(opts.build, "tools", "fastslam")
-        data["accuracy"] = dict(stamp, tables=measure_accuracy(fastslam, opts.jobs))
+        only = opts.tables.split(",") if opts.tables else None
+        kept = data.get("accuracy", {}).get("tables") if only else None
+        data["accuracy"] = dict(stamp, tables=measure_accuracy(fastslam, opts.jobs, only, kept))
     if opts.run in ("speed", "all"):
         data["speed"] = dict(stamp, tables=measure_speed(opts.build, opts.repetitions))
     if opts.run in ("front-ends", "all"):
