@@ -23,6 +23,7 @@
 // memory for either side (a hash map of node addresses in the writer).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <istream>
 #include <ostream>
@@ -106,6 +107,11 @@ class BasicTreeGraphReader {
   template <class Check>
   void read_leaf(Check& check);
   void read_inner();
+  // Capacity for one more node record, grown geometrically (reserving size() + 1 each time
+  // would copy the whole table at every node: quadratic in the nodes read).
+  void room_for_one() {
+    if (made_.size() == made_.capacity()) made_.reserve(std::max<std::size_t>(64, 2 * made_.size()));
+  }
 
   std::istream* in_;
   NodeHeap* heap_;

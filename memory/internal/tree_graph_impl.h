@@ -141,7 +141,7 @@ void BasicTreeGraphReader<P>::read_leaf(Check& check) {
     }
   }
   if (made_.size() >= kNoNode) fail("too many nodes");
-  made_.reserve(made_.size() + 1);  // nothrow push_back below: the node is never lost
+  room_for_one();  // nothrow push_back below: the node is never lost
   auto* leaf = ::new (heap_->allocate(sizeof(Leaf))) Leaf();
   std::memcpy(static_cast<void*>(leaf->landmarks), landmarks, sizeof(landmarks));
   leaf->aux = mask;
@@ -178,7 +178,7 @@ void BasicTreeGraphReader<P>::read_inner() {
     count += c.count;
   }
   if (count > 0xffffffffu || made_.size() >= kNoNode) fail("too many landmarks or nodes");
-  made_.reserve(made_.size() + 1);
+  room_for_one();
   auto* inner = ::new (heap_->allocate(sizeof(Inner))) Inner();
   for (unsigned i = 0; i < Tree::kInnerWidth; ++i) {
     if (mask >> i & 1u) {
