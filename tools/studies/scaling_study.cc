@@ -85,6 +85,10 @@ ScalingPoint run_linear_point(const engine::FilterConfig& config, const std::vec
   const engine::Pose mean = filter.mean_pose();
   p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   p.cpu_seconds = process_cpu_seconds() - cpu0;
+  if (timed != nullptr) {  // the updates' collective time, before the estimate's gathers
+    p.gather_seconds = timed->gather_seconds;
+    p.transfer_seconds = timed->exchange_seconds;
+  }
   const LinearStatistics& st = filter.statistics();
   p.updates = st.scans;
   p.observations = st.observations;
@@ -169,8 +173,6 @@ ScalingPoint run_scaling_point(const ScalingOptions& options, std::uint64_t land
   p.observe_wall_seconds = st.observe_wall_seconds;
   if (timed != nullptr) {
     p.ranks = options.group->size();
-    p.gather_seconds = timed->gather_seconds;
-    p.transfer_seconds = timed->exchange_seconds;
     p.exchange_seconds = st.exchange_seconds;
     p.resamples = st.resamples;
     using Sent = std::array<std::uint64_t, 4>;
