@@ -85,10 +85,6 @@ ScalingPoint run_linear_point(const engine::FilterConfig& config, const std::vec
   const engine::Pose mean = filter.mean_pose();
   p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   p.cpu_seconds = process_cpu_seconds() - cpu0;
-  if (timed != nullptr) {  // the updates' collective time, before the estimate's gathers
-    p.gather_seconds = timed->gather_seconds;
-    p.transfer_seconds = timed->exchange_seconds;
-  }
   const LinearStatistics& st = filter.statistics();
   p.updates = st.scans;
   p.observations = st.observations;
@@ -154,6 +150,10 @@ ScalingPoint run_scaling_point(const ScalingOptions& options, std::uint64_t land
   (void)filter.particles();  // runs any controls still queued (none when the route ends on a scan)
   p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   p.cpu_seconds = process_cpu_seconds() - cpu0;
+  if (timed != nullptr) {  // the updates' collective time, before the estimate's gathers
+    p.gather_seconds = timed->gather_seconds;
+    p.transfer_seconds = timed->exchange_seconds;
+  }
   // Not timed: the estimate copies the best particle's whole map, O(N) (at N = 10^7 it cost
   // more than the 500 updates together before it was moved out of the timed part).
   const engine::Estimate estimate = filter.estimate();
