@@ -12,7 +12,6 @@ under ThreadSanitizer; under AddressSanitizer without leak detection.
 Usage: run_mpi_test.py FASTSLAM_BINARY
 """
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -21,6 +20,7 @@ import time
 import unittest
 
 import checkpoint_resume_test as crt
+import sweep_mpi_test
 
 FASTSLAM = None
 TIMEOUT = 300
@@ -123,23 +123,13 @@ class RunOverRanksTest(unittest.TestCase):
         self.assertEqual(m["status"], "interrupted", err)
 
 
-def skip_reason():
-    if shutil.which("mpirun") is None:
-        return "no mpirun on PATH (Debian: openmpi-bin)"
-    if "thread" in os.environ.get("FASTSLAM_SANITIZE", ""):
-        return "ThreadSanitizer build: Open MPI's progress threads are not instrumented"
-    version = subprocess.run([FASTSLAM, "--version"], capture_output=True, text=True).stdout
-    if "\nmpi yes" not in version:
-        return "fastslam was built without MPI (libopenmpi-dev)"
-    return None
-
-
 if __name__ == "__main__":
     FASTSLAM = os.path.abspath(sys.argv.pop(1))
     crt.FASTSLAM = FASTSLAM
+    sweep_mpi_test.FASTSLAM = FASTSLAM
     if "address" in os.environ.get("FASTSLAM_SANITIZE", ""):
         os.environ["ASAN_OPTIONS"] = os.environ.get("ASAN_OPTIONS", "") + ":detect_leaks=0"
-    reason = skip_reason()
+    reason = sweep_mpi_test.skip_reason()
     if reason:
         print("SKIP: run under mpirun: " + reason)
         sys.exit(77)
