@@ -22,6 +22,7 @@
 
 #include "engine/filter.h"
 #include "engine/motion_model.h"
+#include "tests/engine/filter_scenarios.h"
 #include "tests/engine/test_util.h"
 #include "tests/engine/webmap_world.h"
 #include "tests/shared_data.h"
@@ -79,37 +80,13 @@ void expect_throw_with(F&& call, const std::string& needle) {
 
 // ---- Simulated scenarios ------------------------------------------------------------------------
 
-struct Event {
-  bool is_scan = false;
-  Control control;
-  double dt = 0.0;
-  std::vector<Observation> scan;
-};
-
-struct Scenario {
-  tools::World world;
-  std::vector<Event> events;
-  std::vector<tools::TruePose> truth;  // after each control
-};
+// The filter tests' scenarios (tests/engine/filter_scenarios.h), each run to its end.
+using testing::Event;
+using testing::Scenario;
 
 Scenario simulate(tools::World world, const tools::SimConfig& sim_config, std::uint64_t seed) {
-  Scenario out;
-  out.world = std::move(world);
-  tools::Simulator sim(out.world, sim_config, seed);
-  tools::SimStep step;
-  while (sim.next(step)) {
-    out.events.push_back({false, {step.speed, step.steer}, step.dt, {}});
-    out.truth.push_back(step.truth);
-    if (step.has_scan) {
-      Event e;
-      e.is_scan = true;
-      for (const tools::SimObservation& z : step.scan) {
-        e.scan.push_back({z.range, z.bearing, static_cast<std::int64_t>(z.landmark)});
-      }
-      out.events.push_back(std::move(e));
-    }
-  }
-  return out;
+  return testing::simulate(std::move(world), sim_config, seed,
+                           std::numeric_limits<std::size_t>::max());
 }
 
 template <class Estimator>
