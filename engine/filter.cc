@@ -257,13 +257,17 @@ Estimate Filter::estimate(EstimateMap map_part) {
   e.associations = impl_->state.associations;
   e.best_particle = static_cast<std::uint32_t>(best.index);
   // The best particle's pose, map size and map, from the rank holding it.
-  std::vector<double> pose;
+  struct BestOf {
+    double pose[5];
+    std::uint64_t map_size;
+  };
+  std::vector<BestOf> best_of(1);  // the holder's; the others' are overwritten by the broadcast
   std::vector<MapLandmark> landmarks;
   if (best.here) {
     const std::size_t b = best.local;
-    pose = {store.x()[b], store.y()[b], store.theta()[b], store.v()[b], store.omega()[b]};
     const memory::LandmarkTree& map = store.map(b).tree();
-    pose.push_back(static_cast<double>(map.size()));
+    best_of[0] = {{store.x()[b], store.y()[b], store.theta()[b], store.v()[b], store.omega()[b]},
+                  map.size()};
     if (map_part == EstimateMap::kCopy) {
       landmarks.reserve(map.size());
       const bool known_ids = s.config.association == Association::kKnown;
@@ -276,11 +280,11 @@ Estimate Filter::estimate(EstimateMap map_part) {
     }
   }
   if (group != nullptr) {
-    pose = internal::broadcast(*group, best.owner, pose);
+    best_of = internal::broadcast(*group, best.owner, best_of);
     if (map_part == EstimateMap::kCopy) landmarks = internal::broadcast(*group, best.owner, landmarks);
   }
-  std::copy_n(pose.begin(), 5, e.best_pose);
-  e.map_size = static_cast<std::size_t>(pose[5]);
+  std::copy_n(best_of[0].pose, 5, e.best_pose);
+  e.map_size = best_of[0].map_size;
   e.map = std::move(landmarks);
   return e;
 }
