@@ -179,6 +179,10 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
     const memory::Landmark stored{l.x, l.y, l.sxx, l.sxy, l.syy, l.log_odds, l.id, 0};
     tree.insert(stored);
   }
+  if (s.links != nullptr) {  // every rank builds this tree alike: its nodes never travel
+    s.links->registry.unpin();
+    s.links->registry.pin(tree);
+  }
   const memory::ParticleMap map(std::move(tree), s.store.options().indexing,
                                 internal::largest_variance);
   for (std::size_t i = 0; i < s.store.size(); ++i) s.store.map(i) = map;

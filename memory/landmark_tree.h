@@ -139,6 +139,8 @@ class BasicLandmarkTree {
   friend class BasicTreeGraphWriter;
   template <class>
   friend class BasicTreeGraphReader;
+  template <class>
+  friend class BasicNodeRegistry;
 
   using Refcount = typename Policy::RefcountType;
   struct Node {

@@ -20,6 +20,8 @@ struct AtomicRefcount {
   bool release() noexcept { return count.fetch_sub(1, std::memory_order_acq_rel) == 1; }
   // Acquire: writes of the thread that dropped the count to one happen before ours.
   bool unique() const noexcept { return count.load(std::memory_order_acquire) == 1; }
+  // The references held now: exact only while no other thread changes them.
+  std::uint32_t use_count() const noexcept { return count.load(std::memory_order_acquire); }
 };
 
 struct LocalRefcount {
@@ -27,6 +29,7 @@ struct LocalRefcount {
   void acquire() noexcept { ++count; }
   bool release() noexcept { return --count == 0; }
   bool unique() const noexcept { return count == 1; }
+  std::uint32_t use_count() const noexcept { return count; }
 };
 
 }  // namespace fastslam::memory

@@ -9,6 +9,14 @@
 //   tree   u8 2, u8 height, u32 root id (kNoNode: the empty tree)
 // Node ids number the node records from 0 in the order written, over the whole graph.
 //
+// The linked form (the particle exchange between processes) names nodes through a
+// NodeRegistry (memory/node_registry.h) on both sides: every node record is followed by its
+// u64 name, and a node the receiver holds already is one record instead of its subtree:
+//   held   u8 3, u8 height, u32 base slot, u64 name
+// The writer sends as held the pinned nodes and those named in the receiver's set it is given;
+// it names the nodes it writes that have no name yet. The reader resolves held names in its
+// registry and names the nodes it reads (a name it holds already keeps its node).
+//
 // The reader trusts nothing: a record must be well formed (a known tag, no bits beyond the
 // node's width, no empty node), a child must be an earlier node one level lower whose base slot
 // is its place under the parent, a root must have base 0 and the tree's height, every landmark
@@ -29,9 +37,11 @@
 #include <ostream>
 #include <stdexcept>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "memory/landmark_tree.h"
+#include "memory/node_registry.h"
 
 namespace fastslam::memory {
 
@@ -47,13 +57,23 @@ class BasicTreeGraphWriter {
  public:
   using Tree = BasicLandmarkTree<Policy>;
 
+  using Registry = BasicNodeRegistry<Policy>;
+
   explicit BasicTreeGraphWriter(std::ostream& out) : out_(&out) {}
+  // The linked form, for a receiver holding the pinned nodes and those named in
+  // `receiver_holds`; both must outlive the writer.
+  BasicTreeGraphWriter(std::ostream& out, Registry& registry,
+                       const std::unordered_set<NodeId>& receiver_holds)
+      : out_(&out), registry_(&registry), receiver_holds_(&receiver_holds) {}
 
   // Writes the nodes of `tree` not written yet, then its tree record. Stream errors are the
   // stream's state, for the caller to check.
   void write(const Tree& tree);
 
+  // Node records and held records written.
   std::uint64_t nodes_written() const noexcept { return ids_.size(); }
+  // The linked form: the names of the node records written (the nodes the receiver will hold).
+  const std::vector<NodeId>& named() const noexcept { return named_; }
 
  private:
   using Node = typename Tree::Node;
@@ -61,6 +81,9 @@ class BasicTreeGraphWriter {
 
   std::ostream* out_;
   std::unordered_map<const Node*, std::uint32_t> ids_;
+  Registry* registry_ = nullptr;
+  const std::unordered_set<NodeId>* receiver_holds_ = nullptr;
+  std::vector<NodeId> named_;
 };
 
 template <class Policy>
@@ -68,8 +91,13 @@ class BasicTreeGraphReader {
  public:
   using Tree = BasicLandmarkTree<Policy>;
 
+  using Registry = BasicNodeRegistry<Policy>;
+
   // Nodes come from `heap`, which must outlive the trees read.
   BasicTreeGraphReader(std::istream& in, NodeHeap& heap) : in_(&in), heap_(&heap) {}
+  // The linked form: held records resolve in `registry`, which names the nodes read.
+  BasicTreeGraphReader(std::istream& in, NodeHeap& heap, Registry& registry)
+      : in_(&in), heap_(&heap), registry_(&registry) {}
   BasicTreeGraphReader(const BasicTreeGraphReader&) = delete;
   BasicTreeGraphReader& operator=(const BasicTreeGraphReader&) = delete;
   ~BasicTreeGraphReader();
@@ -89,6 +117,8 @@ class BasicTreeGraphReader {
   // Node records and landmarks read so far: the input's size, for a caller's work bounds.
   std::uint64_t nodes_read() const noexcept { return made_.size(); }
   std::uint64_t landmarks_read() const noexcept { return landmarks_read_; }
+  // The linked form: the names of the node records read.
+  const std::vector<NodeId>& named() const noexcept { return named_; }
 
  private:
   using Node = typename Tree::Node;
@@ -107,6 +137,10 @@ class BasicTreeGraphReader {
   template <class Check>
   void read_leaf(Check& check);
   void read_inner();
+  void read_held();
+  // The linked form: reads the name of the node just read; a name held already replaces the
+  // new node by the held one.
+  void name_last();
   // Capacity for one more node record, grown geometrically (reserving size() + 1 each time
   // would copy the whole table at every node: quadratic in the nodes read).
   void room_for_one() {
@@ -118,6 +152,8 @@ class BasicTreeGraphReader {
   std::vector<Made> made_;  // every node read, in id order, one reference each
   std::uint64_t landmarks_read_ = 0;
   bool truncated_ = false;
+  Registry* registry_ = nullptr;
+  std::vector<NodeId> named_;
 };
 
 using TreeGraphWriter = BasicTreeGraphWriter<DefaultTreePolicy>;

@@ -30,6 +30,7 @@ FilterState::FilterState(const FilterConfig& c, parallel::Collective* g)
 FilterState::FilterState(const FilterConfig& c, parallel::Collective* g,
                          parallel::ParticleShare share)
     : config(c), group(g), first_particle(static_cast<std::uint32_t>(share.first)),
+      links(g == nullptr ? nullptr : std::make_unique<NodeLinks>(heap, g->rank(), g->size())),
       store(share.count, heap, store_options(c)), covariances(store), sensor(c.sensor.offset) {
   r << c.sensor.sigma_range * c.sensor.sigma_range, 0, 0,
       c.sensor.sigma_bearing * c.sensor.sigma_bearing;

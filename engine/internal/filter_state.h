@@ -7,6 +7,8 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <unordered_set>
 #include <vector>
 
 #include <Eigen/Core>
@@ -18,6 +20,7 @@
 #include "engine/internal/scan_report.h"
 #include "engine/measurement_model.h"
 #include "memory/node_heap.h"
+#include "memory/node_registry.h"
 #include "memory/particle_store.h"
 #include "parallel/collective.h"
 
@@ -49,6 +52,19 @@ struct ExchangeTotals {
   double seconds = 0.0;
 };
 
+// What a rank of a shared set knows of the node names that let the particle exchange skip the
+// nodes a receiver holds (engine/internal/particle_exchange.h; docs/distributed.md).
+struct NodeLinks {
+  NodeLinks(memory::NodeHeap& heap, int rank, int ranks)
+      : registry(heap, static_cast<std::uint64_t>(rank) + 1), held_by(ranks), retired_for(ranks) {}
+  memory::NodeRegistry registry;
+  // Per rank: the names it holds as far as this rank knows (sent to it or received from it,
+  // and not retired since; pinned names are held everywhere and not listed).
+  std::vector<std::unordered_set<memory::NodeId>> held_by;
+  // Per rank: names this rank retired that it lists in held_by, to tell it at the next exchange.
+  std::vector<std::vector<memory::NodeId>> retired_for;
+};
+
 // The store a configuration needs: a spatial index per map for unknown association (known ids
 // find landmarks by slot); FastSLAM 2.0's covariances, carried through resampling without
 // odometry, where the velocities' covariance outlives the scan (draw_state).
@@ -66,6 +82,7 @@ struct FilterState {
   parallel::Collective* group;
   std::uint32_t first_particle;
   memory::PoolHeap heap;  // before the store: outlives every map
+  std::unique_ptr<NodeLinks> links;  // with a group
   memory::ParticleStore store;
   PoseCovariances covariances;
   RangeBearingModel sensor;

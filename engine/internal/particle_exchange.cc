@@ -6,6 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "engine/internal/map_update.h"
@@ -67,10 +68,16 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
   }
 
   ExchangeCounts counts;
+  NodeLinks& links = *s.links;
   std::vector<parallel::Bytes> to(static_cast<std::size_t>(ranks));
   for (int d = 0; d < ranks; ++d) {
-    if (d == me || runs[d].empty()) continue;
+    std::vector<memory::NodeId>& retired = links.retired_for[d];
+    if (d == me || (runs[d].empty() && retired.empty())) continue;
     std::ostringstream out;
+    const std::uint64_t released = retired.size();
+    put(out, &released, sizeof released);
+    put(out, retired.data(), retired.size() * sizeof(memory::NodeId));
+    counts.names_retired += released;
     const std::uint64_t sent = runs[d].size();
     put(out, &sent, sizeof sent);
     for (const Run& run : runs[d]) {
@@ -85,8 +92,15 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
           run.copies * (sizeof p + (carried ? kCov * sizeof(double) : 0) +
                         store.map(i).size() * sizeof(memory::Landmark));
     }
-    memory::TreeGraphWriter graph(out);
-    for (const Run& run : runs[d]) graph.write(store.map(run.particle).tree());
+    if (sent > 0) {
+      std::unordered_set<memory::NodeId>& held = links.held_by[d];
+      memory::TreeGraphWriter graph(out, links.registry, held);
+      for (const Run& run : runs[d]) graph.write(store.map(run.particle).tree());
+      held.insert(graph.named().begin(), graph.named().end());
+      counts.nodes_sent += graph.named().size();
+      counts.nodes_held += graph.nodes_written() - graph.named().size();
+    }
+    retired.clear();
     const std::string bytes = std::move(out).str();
     to[d].resize(bytes.size());
     std::memcpy(to[d].data(), bytes.data(), bytes.size());
@@ -107,9 +121,21 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
     if (from[r].empty()) continue;
     std::istringstream in(std::string(reinterpret_cast<const char*>(from[r].data()),
                                       from[r].size()));
+    std::uint64_t released = 0;
+    get(in, &released, sizeof released, r);
+    if (released > from[r].size() / sizeof(memory::NodeId)) {
+      throw std::logic_error("resampling exchange: rank " + std::to_string(r) + " retired " +
+                               std::to_string(released) + " nodes in a shorter message");
+    }
+    for (std::uint64_t k = 0; k < released; ++k) {
+      memory::NodeId name = 0;
+      get(in, &name, sizeof name, r);
+      links.held_by[r].erase(name);
+    }
     std::uint64_t arriving = 0;
     get(in, &arriving, sizeof arriving, r);
-    if (arriving == 0 || arriving > shares[me].count) {
+    if (arriving == 0) continue;
+    if (arriving > shares[me].count) {
       throw std::logic_error("resampling exchange: rank " + std::to_string(r) + " sent " +
                                std::to_string(arriving) + " particles for " +
                                std::to_string(shares[me].count) + " slots");
@@ -132,21 +158,23 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
       }
       index.insert(index.end(), p.copies, static_cast<std::uint32_t>(k));
     }
-    memory::TreeGraphReader graph(in, s.heap);
+    memory::TreeGraphReader graph(in, s.heap, links.registry);
     try {
       for (std::size_t j = 0; j < arriving; ++j) {
         memory::LandmarkTree tree = graph.read([](memory::Slot, const memory::Landmark&) {});
         const std::size_t k = at + j;
-        if (j == 0 || store.options().indexing == memory::Indexing::kNone) {
+        if (k == 0 || store.options().indexing == memory::Indexing::kNone) {
           store.map(k) =
               memory::ParticleMap(std::move(tree), store.options().indexing, largest_variance);
         } else {
+          // Beside the previous arrival's map, or a local one's: they share most nodes.
           std::uint64_t steps = std::numeric_limits<std::uint64_t>::max();
-          store.map(k) =
-              memory::ParticleMap(std::move(tree), store.map(k - 1), largest_variance, steps);
+          store.map(k) = memory::ParticleMap(std::move(tree), store.map(k - 1),
+                                             largest_variance, steps);
         }
       }
       graph.finish();
+      links.held_by[r].insert(graph.named().begin(), graph.named().end());
     } catch (const memory::TreeGraphError& e) {
       throw std::logic_error("resampling exchange: the maps from rank " + std::to_string(r) +
                                ": " + e.what());
@@ -158,6 +186,13 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
                              std::to_string(shares[me].count) + " slots");
   }
   kernel.execute([&] { store.gather(index, grain); });
+  // The nodes no particle holds now retire here; the ranks that hold their names hear of it at
+  // the next exchange, and until then may still send them as held.
+  for (const memory::NodeId name : links.registry.sweep()) {
+    for (int r = 0; r < ranks; ++r) {
+      if (r != me && links.held_by[r].erase(name) > 0) links.retired_for[r].push_back(name);
+    }
+  }
   return counts;
 }
 

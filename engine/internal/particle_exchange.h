@@ -3,15 +3,20 @@
 // particles; `exchange_particles` sends the copies bound for other ranks' slots and replaces the
 // store by this rank's share of the outputs, in output order, so the set afterwards is the one
 // one process's gather makes, dealt as particle_share deals it.
-// A message carries, per particle sent, its copy count, its pose and velocities, its FastSLAM
-// 2.0 covariance when carried, then the particles' maps as one node graph
-// (memory/tree_graph.h): a subtree the sent maps share is sent once per message and arrives
-// shared. Spatial indices are not sent: each is rebuilt beside the previous arrival's
-// (ParticleMap's near constructor), as a loaded state's are. Design and costs:
-// docs/distributed.md.
+// A message carries the names this rank retired that the receiver holds (below), then per
+// particle sent its copy count, its pose and velocities, its FastSLAM 2.0 covariance when
+// carried, then the particles' maps as one node graph in the linked form (memory/tree_graph.h):
+// a subtree the receiver holds already is sent as its name, any other once per message.
+// Names (memory/node_registry.h, FilterState::links): a node gets one when it is first sent, or
+// when a prior map is set (pinned: every rank builds it alike); each rank lists, per other rank,
+// the names it sent to it or received from it. After the exchange each rank sweeps its registry:
+// the named nodes no particle holds retire (resolvable until the next exchange) and are told to
+// the ranks that list them, in the next message. Spatial indices are not sent: each is rebuilt
+// beside the previous arrival's or a local map's (ParticleMap's near constructor), as a loaded
+// state's are. Design and costs: docs/distributed.md.
 // Thread safety: thread-compatible, and collective (every rank calls it at the same step).
-// Costs: O(M / R) plus the nodes sent and received and the arrivals' index changes; one
-// exchange of R messages a rank.
+// Costs: O(M / R) plus the nodes sent and received, the arrivals' index changes and a sweep of
+// the named nodes (a read of each one's count); one exchange of R messages a rank.
 #pragma once
 
 #include <cstdint>
@@ -29,6 +34,9 @@ struct ExchangeCounts {
   std::uint64_t bytes_sent = 0;
   // What sending every copy with its whole map would cost: copies x (pose + landmarks).
   std::uint64_t naive_bytes = 0;
+  std::uint64_t nodes_sent = 0;     // node records: nodes the receivers lacked
+  std::uint64_t nodes_held = 0;     // held records: subtrees the receivers hold, by name
+  std::uint64_t names_retired = 0;  // retired names told to other ranks
 };
 
 // REQUIRES: s.group; `ends` of s.store.size() entries and `start` from draw_ranges over the set.

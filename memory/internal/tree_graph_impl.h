@@ -6,11 +6,12 @@
 #include <new>
 #include <string>
 #include <type_traits>
+#include <utility>
 
 namespace fastslam::memory {
 
 namespace internal {
-enum class GraphTag : std::uint8_t { kLeaf = 0, kInner = 1, kTree = 2 };
+enum class GraphTag : std::uint8_t { kLeaf = 0, kInner = 1, kTree = 2, kHeld = 3 };
 
 template <class T>
 void put_raw(std::ostream& out, const T& value) {
@@ -33,6 +34,16 @@ std::uint32_t BasicTreeGraphWriter<P>::write_node(const Node* node, unsigned hei
                                                   std::uint64_t base) {
   if (const auto found = ids_.find(node); found != ids_.end()) {
     return found->second;
+  }
+  const NodeId* name = registry_ == nullptr ? nullptr : registry_->find(node);
+  if (name != nullptr && (is_pinned(*name) || receiver_holds_->contains(*name))) {
+    internal::put_raw(*out_, internal::GraphTag::kHeld);
+    internal::put_raw(*out_, static_cast<std::uint8_t>(height));
+    internal::put_raw(*out_, static_cast<std::uint32_t>(base));
+    internal::put_raw(*out_, *name);
+    const auto id = static_cast<std::uint32_t>(ids_.size());
+    ids_.emplace(node, id);
+    return id;
   }
   if (height == 0) {
     const auto* leaf = static_cast<const typename Tree::Leaf*>(node);
@@ -60,6 +71,19 @@ std::uint32_t BasicTreeGraphWriter<P>::write_node(const Node* node, unsigned hei
     for (unsigned i = 0; i < Tree::kInnerWidth; ++i) {
       if (mask >> i & 1u) internal::put_raw(*out_, children[i]);
     }
+  }
+  if (registry_ != nullptr) {
+    NodeId named = 0;
+    if (name != nullptr) {
+      named = *name;
+    } else {
+      named = registry_->fresh();
+      const std::uint32_t count =
+          height == 0 ? static_cast<std::uint32_t>(std::popcount(node->aux)) : node->aux;
+      registry_->add(const_cast<Node*>(node), height, base, count, named);
+    }
+    internal::put_raw(*out_, named);
+    named_.push_back(named);
   }
   const auto id = static_cast<std::uint32_t>(ids_.size());
   ids_.emplace(node, id);
@@ -98,11 +122,16 @@ auto BasicTreeGraphReader<P>::read(Check&& check) -> Tree {
       read_leaf(check);
     } else if (tag == static_cast<std::uint8_t>(internal::GraphTag::kInner)) {
       read_inner();
+    } else if (tag == static_cast<std::uint8_t>(internal::GraphTag::kHeld) &&
+               registry_ != nullptr) {
+      read_held();
+      continue;
     } else if (tag == static_cast<std::uint8_t>(internal::GraphTag::kTree)) {
       break;
     } else {
       fail("unknown record tag " + std::to_string(tag));
     }
+    if (registry_ != nullptr) name_last();
   }
   const auto height = get<std::uint8_t>();
   const auto root = get<std::uint32_t>();
@@ -188,6 +217,43 @@ void BasicTreeGraphReader<P>::read_inner() {
   }
   inner->aux = static_cast<std::uint32_t>(count);
   made_.push_back({inner, base, height, static_cast<std::uint32_t>(count)});
+}
+
+template <class P>
+void BasicTreeGraphReader<P>::read_held() {
+  const auto height = get<std::uint8_t>();
+  const auto base = get<std::uint32_t>();
+  const auto name = get<NodeId>();
+  const auto* held = registry_->hold(name);
+  if (held == nullptr) fail("node " + std::to_string(name) + " is not held here");
+  if (held->entry.height != height || held->entry.base != base) {
+    fail("held node " + std::to_string(name) + " has height " +
+         std::to_string(held->entry.height) + " and base " + std::to_string(held->entry.base) +
+         ", not " + std::to_string(height) + " and " + std::to_string(base));
+  }
+  if (made_.size() >= kNoNode) fail("too many nodes");
+  room_for_one();
+  held->node->refs.acquire();
+  made_.push_back({held->node, base, height, held->entry.count});
+}
+
+template <class P>
+void BasicTreeGraphReader<P>::name_last() {
+  const auto name = get<NodeId>();
+  Made& last = made_.back();
+  if (is_pinned(name)) fail("a node record named as pinned (" + std::to_string(name) + ")");
+  named_.push_back(name);
+  const auto* held = registry_->hold(name);
+  if (held == nullptr) {
+    registry_->add(last.node, last.height, last.base, last.count, name);
+    return;
+  }
+  if (held->entry.height != last.height || held->entry.base != last.base ||
+      held->entry.count != last.count) {
+    fail("node " + std::to_string(name) + " differs from the node of that name held here");
+  }
+  held->node->refs.acquire();
+  Tree::release(std::exchange(last.node, held->node), last.height, *heap_);
 }
 
 template <class P>

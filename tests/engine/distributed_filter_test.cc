@@ -30,7 +30,9 @@ struct RankResult {
 
 // Each rank's run of `s`, ranks x threads.
 std::vector<RankResult> run_shared(FilterConfig config, const Scenario& s, int ranks,
-                                   unsigned threads) {
+                                   unsigned threads,
+                                   const std::function<void(Filter&)>& prepare = {},
+                                   const std::function<Snapshot(Filter&)>& take = snapshot) {
   config.threads = threads;
   parallel::LocalGroup group(ranks);
   std::vector<RankResult> out(static_cast<std::size_t>(ranks));
@@ -40,13 +42,16 @@ std::vector<RankResult> run_shared(FilterConfig config, const Scenario& s, int r
     workers.emplace_back([&, r] {
       try {
         Filter filter(config, group.member(r));
+        if (prepare) prepare(filter);
         feed(filter, s.events, 0, s.events.size());
         RankResult& mine = out[static_cast<std::size_t>(r)];
         mine.trajectory = filter.take_trajectory();
         mine.estimate = filter.estimate();
-        mine.particles = snapshot(filter);
+        mine.particles = take(filter);
         mine.statistics = filter.statistics();
-      } catch (...) {
+      } catch (const std::exception& e) {
+        // Said at once: a rank failing alone leaves the others waiting in a collective call.
+        std::fprintf(stderr, "rank %d: %s\n", r, e.what());
         failed[static_cast<std::size_t>(r)] = std::current_exception();
       }
     });
@@ -160,6 +165,54 @@ INSTANTIATE_TEST_SUITE_P(Cases, SharedFilterTest, ::testing::ValuesIn(kSharedCas
                          [](const ::testing::TestParamInfo<SharedCase>& p) {
                            return std::string(p.param.name);
                          });
+
+// The exchange sends what a receiver lacks: a prior map every rank set never travels, and after
+// that a message carries the paths changed since the maps last met. Without names each message
+// would carry at least one whole map.
+TEST(SharedFilterMapsTest, APriorMapNeverTravels) {
+  const Scenario& s = loop_scenario();
+  const FilterConfig config = base_config(Algorithm::kFastSlam1, 1000);
+  std::vector<MapLandmark> prior;  // far from the loop: never seen, never changed
+  const int n = kSanitized ? 20000 : 100000;
+  for (int k = 0; k < n; ++k) {
+    prior.push_back({0, 1'000'000u + static_cast<std::uint64_t>(k), 1e4 + (k % 300) * 3.0,
+                     1e4 + (k / 300) * 3.0, 0.1, 0.0, 0.1, 0.0, 0});
+  }
+  const auto prepare = [&](Filter& f) { f.set_map(prior); };
+  // Every column, each map's size and its landmarks beyond the prior's slots.
+  const auto take = [&](Filter& f) {
+    Snapshot all = snapshot_columns(f);
+    const memory::ParticleStore& store = f.particles();
+    all.maps.resize(store.size());
+    for (std::size_t i = 0; i < store.size(); ++i) {
+      const memory::LandmarkTree& map = store.map(i).tree();
+      all.maps[i].emplace_back(static_cast<memory::Slot>(map.size()), memory::Landmark{});
+      for (auto it = map.begin(); it != map.end(); ++it) {
+        if ((*it).slot >= static_cast<memory::Slot>(n)) all.maps[i].emplace_back((*it).slot, (*it).landmark);
+      }
+    }
+    return all;
+  };
+  Filter one(config);
+  prepare(one);
+  feed(one, s.events, 0, s.events.size());
+  const Snapshot particles = take(one);
+  const std::uint64_t resamples = one.statistics().resamples;
+  ASSERT_GT(resamples, 3u);
+  for (const int ranks : {2, 3}) {
+    const std::vector<RankResult> shared = run_shared(config, s, ranks, 1, prepare, take);
+    EXPECT_TRUE(identical(concatenated(shared), particles)) << ranks << " ranks";
+    std::uint64_t bytes = 0, copies = 0;
+    for (const RankResult& r : shared) {
+      bytes += r.statistics.exchange_bytes;
+      copies += r.statistics.exchange_copies;
+    }
+    EXPECT_GT(copies, 0u);
+    const double map_bytes = static_cast<double>(n) * sizeof(memory::Landmark);
+    EXPECT_LT(static_cast<double>(bytes) / static_cast<double>(resamples), map_bytes / 10)
+        << ranks << " ranks: " << bytes << " bytes over " << resamples << " resamplings";
+  }
+}
 
 TEST(SharedFilterErrorsTest, ASetTooSmallForItsRanksIsRefusedByName) {
   FilterConfig config = base_config(Algorithm::kFastSlam1, 300);

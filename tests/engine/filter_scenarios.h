@@ -107,12 +107,18 @@ struct Snapshot {
   std::vector<std::vector<std::pair<memory::Slot, memory::Landmark>>> maps;
 };
 
-inline Snapshot snapshot(Filter& filter) {
+inline Snapshot snapshot_columns(Filter& filter) {
   const memory::ParticleStore& store = filter.particles();
   Snapshot s;
   const std::span<const double> cols[6] = {store.x(), store.y(),     store.theta(),
                                            store.v(), store.omega(), store.log_weight()};
   for (int k = 0; k < 6; ++k) s.columns[k].assign(cols[k].begin(), cols[k].end());
+  return s;
+}
+
+inline Snapshot snapshot(Filter& filter) {
+  const memory::ParticleStore& store = filter.particles();
+  Snapshot s = snapshot_columns(filter);
   s.maps.resize(store.size());
   for (std::size_t i = 0; i < store.size(); ++i) {
     for (const auto [slot, lm] : store.map(i)) s.maps[i].emplace_back(slot, lm);
