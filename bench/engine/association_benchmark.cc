@@ -57,7 +57,8 @@ namespace bench {
     const memory::SpatialIndex& index, const std::vector<internal::PlannedObservation>& scan,
     internal::CandidateScratch& scratch, std::span<std::int64_t> assignment) {
   internal::find_candidates<3, false, true>(in, prior, map, index, scan, scratch);
-  return associate_maximum_likelihood(scratch.candidates, in.log_p0, assignment);
+  return internal::choose_maximum_likelihood<3>(in, prior, map, scan, scratch, in.log_p0,
+                                                assignment);
 }
 
 }  // namespace bench
