@@ -27,6 +27,7 @@
 #include <cstdint>
 #include <limits>
 #include <span>
+#include <type_traits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -52,6 +53,8 @@ struct CandidateScratch {
   std::vector<std::array<double, 4>> discs;
   std::vector<memory::SpatialIndex::Disc> queries;  // the discs as the index takes them
   std::vector<Eigen::Vector2d> directions;          // observation j's bearing in the world
+  std::vector<std::uint32_t> counts;                // 1.0 ML: candidates of observation j
+  LazyScratch lazy;                                 // 1.0 ML: the choice's
 };
 
 // What the search reads besides the particle.
@@ -156,6 +159,7 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
   // The observed directions (unit, to rounding): at = sensor position + z_r (cos, sin).
   scratch.queries.resize(scan.size());
   scratch.directions.resize(scan.size());
+  if constexpr (kMl && !kFs2) scratch.counts.assign(scan.size(), 0);
   for (std::size_t j = 0; j < scan.size(); ++j) {
     const auto [at_x, at_y, radius, spread] = scratch.discs[j];
     scratch.queries[j] = {at_x, at_y, radius};
@@ -180,6 +184,7 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
             const double high = log_peak - 0.5 * bound;
             scratch.candidates.push_back(
                 {obs, e.slot, high + 1e-6 * (std::fabs(high) + bound + 1.0), kBoundOnly, 0.0f});
+            ++scratch.counts[j];
             return;
           }
         }
@@ -200,6 +205,48 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
       });
 }
 
+namespace candidate_search_detail {
+
+// choose_maximum_likelihood's body: `Unassociated` as association.h's overloads take it.
+template <int N, class Unassociated>
+double choose(const SearchInput& in, const PoseGaussian<N>& prior, const memory::LandmarkTree& map,
+              const std::vector<PlannedObservation>& scan, CandidateScratch& scratch,
+              const Unassociated& log_unassociated, std::span<std::int64_t> assignment) {
+  const Pose pose = prior.mean.template head<3>();
+  const auto evaluate = [&](AssociationCandidate& c) {
+    return evaluate_candidate<true>(in, pose, map, scan, c, scratch.terms);
+  };
+  // An observation's only candidate is needed whatever the others do (it is taken, or its
+  // observation ends new and the report reads its distance): evaluated at once. When no
+  // observation has more than one, nothing can be skipped, and the plain sort is cheaper than
+  // the heap.
+  std::vector<AssociationCandidate>& candidates = scratch.candidates;
+  std::size_t kept = 0;
+  bool bounded = false;
+  for (std::size_t k = 0; k < candidates.size(); ++k) {
+    AssociationCandidate c = candidates[k];
+    if (scratch.counts[c.observation] == 1) {
+      if (!evaluate(c)) continue;
+    } else {
+      bounded = true;
+    }
+    candidates[kept++] = c;
+  }
+  candidates.resize(kept);
+  if (!bounded) return associate_maximum_likelihood(candidates, log_unassociated, assignment);
+  if constexpr (std::is_same_v<Unassociated, double>) {
+    return lazy_maximum_likelihood(
+        candidates, [log_unassociated](std::size_t) { return log_unassociated; }, true,
+        assignment, scratch.lazy, evaluate);
+  } else {
+    return lazy_maximum_likelihood(
+        candidates, [log_unassociated](std::size_t j) { return log_unassociated[j]; }, false,
+        assignment, scratch.lazy, evaluate);
+  }
+}
+
+}  // namespace candidate_search_detail
+
 // FastSLAM 1.0, maximum likelihood: the choice of associate_maximum_likelihood over
 // find_candidates<N, false, true>'s bounded candidates (same `in`, `prior`, map and scan),
 // evaluating only those it needs (lazy_association.h). Leaves in scratch.candidates the exact
@@ -212,13 +259,8 @@ double choose_maximum_likelihood(const SearchInput& in, const PoseGaussian<N>& p
                                  const std::vector<PlannedObservation>& scan,
                                  CandidateScratch& scratch, double log_new_landmark,
                                  std::span<std::int64_t> assignment) {
-  const Pose pose = prior.mean.template head<3>();
-  return lazy_maximum_likelihood(
-      scratch.candidates, [log_new_landmark](std::size_t) { return log_new_landmark; }, true,
-      assignment, [&](AssociationCandidate& c) {
-        return candidate_search_detail::evaluate_candidate<true>(in, pose, map, scan, c,
-                                                                 scratch.terms);
-      });
+  return candidate_search_detail::choose<N>(in, prior, map, scan, scratch, log_new_landmark,
+                                            assignment);
 }
 // The same with observation j's "no landmark" scored log_unassociated[j] (association.h).
 template <int N>
@@ -228,13 +270,8 @@ double choose_maximum_likelihood(const SearchInput& in, const PoseGaussian<N>& p
                                  CandidateScratch& scratch,
                                  std::span<const double> log_unassociated,
                                  std::span<std::int64_t> assignment) {
-  const Pose pose = prior.mean.template head<3>();
-  return lazy_maximum_likelihood(
-      scratch.candidates, [log_unassociated](std::size_t j) { return log_unassociated[j]; },
-      false, assignment, [&](AssociationCandidate& c) {
-        return candidate_search_detail::evaluate_candidate<true>(in, pose, map, scan, c,
-                                                                 scratch.terms);
-      });
+  return candidate_search_detail::choose<N>(in, prior, map, scan, scratch, log_unassociated,
+                                            assignment);
 }
 
 // Evaluates every bounded candidate of find_candidates<N, false, true> (dropping those the exact

@@ -2,24 +2,28 @@
 // of which some carry only an upper bound on their log-likelihood, evaluated exactly only when
 // the choice or the scan report needs them. Most gated candidates cannot win: the greedy choice
 // takes pairs in decreasing ln p, so a candidate whose bound lies below what its observation
-// takes is never looked at, and one whose observation is already taken is dropped unevaluated.
+// takes is never looked at.
 //
 // The result is that of associate_maximum_likelihood on the exactly evaluated candidate list:
 // the same assignment and the same log weight (the same sum in the same order), and the
 // candidates left in the vector are every candidate of the observations that end "new" (their
 // nearest distance goes into the scan report) and the chosen pair of each other observation,
-// all exact. Why: the candidates live in a max-heap ordered by (key, bound before exact, then
-// observation and slot as the eager sort), the key being the exact ln p or the bound. When an
-// exact candidate is on top, every bounded one below has a bound, hence an exact ln p, strictly
-// smaller (an equal bound sorts first and is evaluated first), so the top is the next pair of
-// the eager order; a bounded candidate on top is evaluated and goes back in (or is dropped when
-// `evaluate` rejects it, as the eager search would not have kept it).
+// all exact (plus other exact ones). How: the greedy order takes, at each step, the largest
+// (ln p, then observation, then slot first) pair whose observation and landmark are both free,
+// so it is enough to know each free observation's best pair over free landmarks. Per
+// observation that is found lazily: the largest key (exact ln p or bound; at equal keys a bound
+// first, then the smaller slot) among its candidates on free landmarks; a bound on top is
+// evaluated (its exact ln p is at most the bound) and the search repeats; an exact value on top
+// is the best, since every bound below it, hence every exact ln p behind it, is smaller. The
+// pairs are then taken in the eager order, and the weight summed in it.
 //
 // `evaluate(c)`: given a candidate with tag == kBoundOnly, fills its exact log_likelihood, tag
 // and mahalanobis2 and returns true, or returns false when the exact candidate is not kept.
-// REQUIRES: a bounded candidate's log_likelihood >= its exact one; tags other than kBoundOnly
-// for exact candidates. Thread safety: a pure function of its arguments and `evaluate`. Costs:
-// O((C + E) log C) for C candidates and E evaluations, no allocation (the heap is the vector).
+// REQUIRES: a bounded candidate's log_likelihood >= its exact one; exact candidates' tags below
+// kDropped; observations below both assignment.size() and 2^31. Thread safety: a pure
+// function of its arguments and `evaluate`. Costs: O(C + Z^2 + E c) for C candidates, Z
+// observations, E evaluations and c the candidates of an observation near its best; no
+// allocation once the scratch has grown.
 #pragma once
 
 #include <algorithm>
@@ -36,17 +40,31 @@ namespace fastslam::engine::internal {
 
 // The tag of a candidate whose log_likelihood is an upper bound, not yet evaluated.
 inline constexpr std::uint32_t kBoundOnly = std::numeric_limits<std::uint32_t>::max();
+// The tag of a candidate evaluate() rejected.
+inline constexpr std::uint32_t kDropped = kBoundOnly - 1;
+
+// lazy_maximum_likelihood's buffers.
+struct LazyScratch {
+  std::vector<AssociationCandidate> grouped;  // the candidates, by observation
+  std::vector<std::uint32_t> start;           // observation j's: [start[j], start[j + 1])
+  std::vector<std::uint32_t> front;           // [start[j], front[j]): keys >= threshold[j]
+  std::vector<double> threshold;
+  std::vector<std::uint8_t> partitioned;  // j's front was cut at its first exact value
+  std::vector<std::int64_t> best;         // index into grouped of j's best free pair, or below 0
+};
 
 namespace lazy_association_detail {
 
-// Whether a comes before b: higher key; at equal keys a bound before an exact value; then the
-// eager order (observation, slot).
+// A candidate whose landmark another observation took (in the observation field).
+inline constexpr std::uint32_t kBlocked = 0x80000000u;
+
+// Whether a comes before b within one observation: higher key; at equal keys a bound first
+// (its exact value may tie), then the smaller slot (the eager order).
 inline bool before(const AssociationCandidate& a, const AssociationCandidate& b) {
   if (a.log_likelihood != b.log_likelihood) return a.log_likelihood > b.log_likelihood;
   const bool a_bound = a.tag == kBoundOnly;
   const bool b_bound = b.tag == kBoundOnly;
   if (a_bound != b_bound) return a_bound;
-  if (a.observation != b.observation) return a.observation < b.observation;
   return a.slot < b.slot;
 }
 
@@ -58,16 +76,29 @@ inline bool before(const AssociationCandidate& a, const AssociationCandidate& b)
 template <class Unassociated, class Evaluate>
 double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
                                const Unassociated& log_unassociated, bool same_for_all,
-                               std::span<std::int64_t> assignment, Evaluate&& evaluate) {
+                               std::span<std::int64_t> assignment, LazyScratch& scratch,
+                               Evaluate&& evaluate) {
   using lazy_association_detail::before;
+  using lazy_association_detail::kBlocked;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const std::size_t z = assignment.size();
   std::fill(assignment.begin(), assignment.end(), kNewLandmark);
-  const auto heap_less = [](const AssociationCandidate& a, const AssociationCandidate& b) {
-    return before(b, a);
-  };
-  const auto first = candidates.begin();
-  std::make_heap(first, candidates.end(), heap_less);
-  // [0, live): the heap; [live, size): popped, exact, or dropped (tag kBoundOnly).
-  std::size_t live = candidates.size();
+  // Grouped by observation (a counting sort).
+  std::vector<std::uint32_t>& start = scratch.start;
+  start.assign(z + 1, 0);
+  for (const AssociationCandidate& c : candidates) ++start[c.observation + 1];
+  for (std::size_t j = 0; j < z; ++j) start[j + 1] += start[j];
+  std::vector<std::uint32_t>& front = scratch.front;
+  front.assign(start.begin(), start.end() - 1);
+  std::vector<AssociationCandidate>& grouped = scratch.grouped;
+  grouped.resize(candidates.size());
+  for (const AssociationCandidate& c : candidates) grouped[front[c.observation]++] = c;
+  // Until a threshold is set, every candidate of j is in its front.
+  scratch.threshold.assign(z, -kInf);
+  scratch.best.assign(z, -1);
+  scratch.partitioned.assign(z, 0);
+  std::vector<double>& threshold = scratch.threshold;
+  std::vector<std::int64_t>& best = scratch.best;
   double log_weight = 0.0;
   std::size_t assigned = 0;
   constexpr std::size_t kListed = 32;  // the taken slots, as in association.cc
@@ -80,42 +111,97 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
     return std::find(assignment.begin(), assignment.end(), static_cast<std::int64_t>(slot)) !=
            assignment.end();
   };
-  while (live > 0 && assigned < assignment.size()) {
-    std::pop_heap(first, first + static_cast<std::ptrdiff_t>(live), heap_less);
-    --live;
-    AssociationCandidate& cand = candidates[live];
-    if (cand.tag == kBoundOnly) {
-      if (assignment[cand.observation] != kNewLandmark) continue;  // cannot be taken: dropped
-      if (!evaluate(cand)) {
-        cand.tag = kBoundOnly;
+  // Observation j's best pair on a free landmark (exact), as an index into `grouped`, or -1.
+  // The first exact value found becomes a threshold: the candidates with keys below it go
+  // behind the front, and are looked at again only if nothing in the front is left above it.
+  const auto resolve = [&](std::size_t j) -> std::int64_t {
+    const std::uint32_t last = start[j + 1];
+    for (;;) {
+      std::int64_t top = -1;
+      for (std::uint32_t k = start[j]; k < front[j]; ++k) {
+        const AssociationCandidate& c = grouped[k];
+        if ((c.observation & kBlocked) != 0 || c.tag == kDropped) continue;
+        if (top < 0 || before(c, grouped[static_cast<std::size_t>(top)])) top = k;
+      }
+      if (front[j] != last &&
+          (top < 0 || grouped[static_cast<std::size_t>(top)].log_likelihood < threshold[j])) {
+        front[j] = last;  // nothing in the front above the threshold: all of j's candidates
+        threshold[j] = -kInf;
         continue;
       }
-      ++live;
-      std::push_heap(first, first + static_cast<std::ptrdiff_t>(live), heap_less);
-      continue;
+      if (top < 0) return -1;
+      AssociationCandidate& c = grouped[static_cast<std::size_t>(top)];
+      if (taken(c.slot)) {
+        c.observation |= kBlocked;
+        continue;
+      }
+      if (c.tag != kBoundOnly) return top;
+      if (!evaluate(c)) {
+        c.tag = kDropped;
+        continue;
+      }
+      if (scratch.partitioned[j] == 0) {
+        scratch.partitioned[j] = 1;
+        const double e = c.log_likelihood;
+        const auto first = grouped.begin() + start[j];
+        front[j] = static_cast<std::uint32_t>(
+            std::partition(first, grouped.begin() + last,
+                           [e](const AssociationCandidate& a) { return a.log_likelihood >= e; }) -
+            grouped.begin());
+        threshold[j] = e;
+      }
     }
-    if (cand.log_likelihood < log_unassociated(cand.observation)) {
-      if (same_for_all) break;  // every later one is below too
-      continue;
+  };
+  constexpr std::int64_t kUnknown = -1;
+  constexpr std::int64_t kFinished = -2;
+  // The greedy order: the largest best pair over the free observations (ties: the smaller
+  // observation), taken unless below its observation's "no landmark" score.
+  for (;;) {
+    std::size_t pick = z;
+    for (std::size_t j = 0; j < z; ++j) {
+      if (best[j] == kFinished) continue;
+      if (best[j] == kUnknown) {
+        const std::int64_t b = resolve(j);
+        best[j] = b < 0 ? kFinished : b;
+        if (b < 0) continue;
+      }
+      if (pick == z || grouped[static_cast<std::size_t>(best[j])].log_likelihood >
+                           grouped[static_cast<std::size_t>(best[pick])].log_likelihood) {
+        pick = j;
+      }
     }
-    if (assignment[cand.observation] != kNewLandmark || taken(cand.slot)) continue;
-    assignment[cand.observation] = cand.slot;
+    if (pick == z) break;
+    const AssociationCandidate& cand = grouped[static_cast<std::size_t>(best[pick])];
+    best[pick] = kFinished;
+    if (cand.log_likelihood < log_unassociated(pick)) continue;  // j stays new
+    assignment[pick] = cand.slot;
     log_weight += cand.log_likelihood;
     if (assigned < kListed) taken_slots[assigned] = cand.slot;
     ++assigned;
+    // The observations whose best pair was on this landmark look again.
+    for (std::size_t j = 0; j < z; ++j) {
+      if (best[j] >= 0 && grouped[static_cast<std::size_t>(best[j])].slot == cand.slot) {
+        grouped[static_cast<std::size_t>(best[j])].observation |= kBlocked;
+        best[j] = kUnknown;
+      }
+    }
   }
-  // What the heap still holds matters only for the observations left new: their candidates'
-  // distances go into the report, so those are evaluated; the rest is dropped.
-  for (std::size_t c = 0; c < live; ++c) {
-    AssociationCandidate& cand = candidates[c];
-    if (cand.tag != kBoundOnly || assignment[cand.observation] != kNewLandmark) continue;
-    if (!evaluate(cand)) cand.tag = kBoundOnly;
+  // The observations left new: all their candidates, exact (the report's nearest distance).
+  // Then the exact candidates go back to `candidates`.
+  candidates.clear();
+  for (std::size_t j = 0; j < z; ++j) {
+    const bool is_new = assignment[j] == kNewLandmark;
+    for (std::uint32_t k = start[j]; k < start[j + 1]; ++k) {
+      AssociationCandidate& c = grouped[k];
+      c.observation &= ~kBlocked;
+      if (is_new && c.tag == kBoundOnly && !evaluate(c)) c.tag = kDropped;
+      if (c.tag < kDropped) candidates.push_back(c);
+    }
   }
-  std::erase_if(candidates, [](const AssociationCandidate& c) { return c.tag == kBoundOnly; });
   if (same_for_all) {
-    log_weight += static_cast<double>(assignment.size() - assigned) * log_unassociated(0);
+    log_weight += static_cast<double>(z - assigned) * log_unassociated(0);
   } else {
-    for (std::size_t j = 0; j < assignment.size(); ++j) {
+    for (std::size_t j = 0; j < z; ++j) {
       if (assignment[j] == kNewLandmark) log_weight += log_unassociated(j);
     }
   }

@@ -45,12 +45,17 @@ Key key_of(const AssociationCandidate& c) {
   return {c.observation, c.slot, c.log_likelihood, c.tag, c.mahalanobis2};
 }
 
-Scan random_scan(std::mt19937_64& rng, bool large) {
+// `kind` 0: small scans; 1: large ones (more than 32 observations assigned: the taken slots'
+// short list gives way to the assignment); 2: a few observations with many candidates each,
+// competing for the same landmarks.
+Scan random_scan(std::mt19937_64& rng, int kind) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   Scan s;
-  s.observations = 1 + static_cast<std::uint32_t>(rng() % (large ? 80 : 9));
-  const std::uint32_t landmarks = 1 + static_cast<std::uint32_t>(rng() % (large ? 80 : 9));
-  const double density = large ? 0.1 : 0.45;
+  const std::uint32_t max_observations[] = {9, 80, 5};
+  const std::uint32_t max_landmarks[] = {9, 80, 60};
+  s.observations = 1 + static_cast<std::uint32_t>(rng() % max_observations[kind]);
+  const std::uint32_t landmarks = 1 + static_cast<std::uint32_t>(rng() % max_landmarks[kind]);
+  const double density = kind == 1 ? 0.1 : kind == 0 ? 0.45 : 0.8;
   const bool coarse = rng() % 3 == 0;  // ln p on a grid: many ties
   for (std::uint32_t j = 0; j < s.observations; ++j) {
     for (memory::Slot n = 0; n < landmarks; ++n) {
@@ -113,7 +118,9 @@ std::size_t expect_lazy_is_eager(const Scan& s, std::span<const double> scores, 
     return true;
   };
   const auto unassociated = [&](std::size_t j) { return one_score ? scores[0] : scores[j]; };
-  const double got_w = lazy_maximum_likelihood(lazy, unassociated, one_score, got, evaluate);
+  LazyScratch scratch;
+  const double got_w =
+      lazy_maximum_likelihood(lazy, unassociated, one_score, got, scratch, evaluate);
   EXPECT_EQ(got, want);
   EXPECT_EQ(got_w, want_w);  // bit for bit: the same sum in the same order
   for (int e : evaluated) EXPECT_LE(e, 1);
@@ -143,7 +150,7 @@ TEST(LazyMaximumLikelihood, EqualsTheEagerChoiceWithOneScore) {
   std::mt19937_64 rng(21);
   std::size_t evaluations = 0, bounded = 0;
   for (int trial = 0; trial < 3000; ++trial) {
-    const Scan s = random_scan(rng, trial % 10 == 0);
+    const Scan s = random_scan(rng, trial % 10 == 0 ? 1 : trial % 10 == 1 ? 2 : 0);
     for (const AssociationCandidate& c : s.lazy) bounded += c.tag == kBoundOnly ? 1 : 0;
     const double log_p0 = -6.0 + static_cast<double>(trial % 4);
     const std::vector<double> scores{log_p0};
@@ -156,7 +163,7 @@ TEST(LazyMaximumLikelihood, EqualsTheEagerChoiceWithPerObservationScores) {
   std::mt19937_64 rng(22);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   for (int trial = 0; trial < 3000; ++trial) {
-    const Scan s = random_scan(rng, trial % 10 == 0);
+    const Scan s = random_scan(rng, trial % 10 == 0 ? 1 : trial % 10 == 1 ? 2 : 0);
     std::vector<double> scores(s.observations);
     for (double& v : scores) v = -6.0 + 6.0 * u(rng);
     expect_lazy_is_eager(s, scores, false);
@@ -170,8 +177,10 @@ TEST(LazyMaximumLikelihood, ABoundBelowTheWinnerIsNeverEvaluated) {
       {0, 0, -1.0, 0, 1.0f}, {0, 1, -2.0, kBoundOnly, 0.0f}, {1, 2, 3.0, kBoundOnly, 0.0f}};
   std::vector<std::int64_t> assignment(2);
   int evaluations = 0;
+  LazyScratch scratch;
   const double w = lazy_maximum_likelihood(
-      c, [](std::size_t) { return -6.0; }, true, assignment, [&](AssociationCandidate& a) {
+      c, [](std::size_t) { return -6.0; }, true, assignment, scratch,
+      [&](AssociationCandidate& a) {
         ++evaluations;
         EXPECT_EQ(a.slot, 2u);
         a.log_likelihood = 2.0;
@@ -188,8 +197,9 @@ TEST(LazyMaximumLikelihood, ABoundBelowTheWinnerIsNeverEvaluated) {
 TEST(LazyMaximumLikelihood, EmptyScan) {
   Candidates c;
   std::vector<std::int64_t> assignment(3, 5);
+  LazyScratch scratch;
   const double w = lazy_maximum_likelihood(
-      c, [](std::size_t) { return -6.0; }, true, assignment,
+      c, [](std::size_t) { return -6.0; }, true, assignment, scratch,
       [](AssociationCandidate&) { return true; });
   EXPECT_EQ(assignment, (std::vector<std::int64_t>(3, kNewLandmark)));
   EXPECT_EQ(w, -18.0);
