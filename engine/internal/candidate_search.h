@@ -216,24 +216,19 @@ double choose(const SearchInput& in, const PoseGaussian<N>& prior, const memory:
   const auto evaluate = [&](AssociationCandidate& c) {
     return evaluate_candidate<true>(in, pose, map, scan, c, scratch.terms);
   };
-  // An observation's only candidate is needed whatever the others do (it is taken, or its
-  // observation ends new and the report reads its distance): evaluated at once. When no
-  // observation has more than one, nothing can be skipped, and the plain sort is cheaper than
-  // the heap.
+  // When no observation has more than one candidate, each is needed whatever the others do
+  // (it is taken, or its observation ends new and the report reads its distance): all are
+  // evaluated, and the plain sort is cheaper than the lazy choice.
   std::vector<AssociationCandidate>& candidates = scratch.candidates;
-  std::size_t kept = 0;
-  bool bounded = false;
-  for (std::size_t k = 0; k < candidates.size(); ++k) {
-    AssociationCandidate c = candidates[k];
-    if (scratch.counts[c.observation] == 1) {
-      if (!evaluate(c)) continue;
-    } else {
-      bounded = true;
+  if (std::all_of(scratch.counts.begin(), scratch.counts.end(),
+                  [](std::uint32_t n) { return n <= 1; })) {
+    std::size_t kept = 0;
+    for (AssociationCandidate& c : candidates) {
+      if (evaluate(c)) candidates[kept++] = c;
     }
-    candidates[kept++] = c;
+    candidates.resize(kept);
+    return associate_maximum_likelihood(candidates, log_unassociated, assignment);
   }
-  candidates.resize(kept);
-  if (!bounded) return associate_maximum_likelihood(candidates, log_unassociated, assignment);
   if constexpr (std::is_same_v<Unassociated, double>) {
     return lazy_maximum_likelihood(
         candidates, [log_unassociated](std::size_t) { return log_unassociated; }, true,

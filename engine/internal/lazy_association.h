@@ -48,9 +48,9 @@ struct LazyScratch {
   std::vector<AssociationCandidate> grouped;  // the candidates, by observation
   std::vector<std::uint32_t> start;           // observation j's: [start[j], start[j + 1])
   std::vector<std::uint32_t> front;           // [start[j], front[j]): keys >= threshold[j]
+  std::vector<std::uint32_t> back;
   std::vector<double> threshold;
-  std::vector<std::uint8_t> partitioned;  // j's front was cut at its first exact value
-  std::vector<std::int64_t> best;         // index into grouped of j's best free pair, or below 0
+  std::vector<std::int64_t> best;  // index into grouped of j's best free pair, or below 0
 };
 
 namespace lazy_association_detail {
@@ -83,22 +83,50 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
   constexpr double kInf = std::numeric_limits<double>::infinity();
   const std::size_t z = assignment.size();
   std::fill(assignment.begin(), assignment.end(), kNewLandmark);
-  // Grouped by observation (a counting sort).
+  // Per observation, the count and the top candidate (largest key). Every observation's best
+  // pair is looked for before any is taken, so its top is evaluated whatever happens; its exact
+  // value cuts the observation's candidates into a front (keys at or above it) and a back,
+  // which is looked at only if nothing in the front is left above the cut.
   std::vector<std::uint32_t>& start = scratch.start;
+  std::vector<std::int64_t>& best = scratch.best;  // first the top's index into `candidates`
   start.assign(z + 1, 0);
-  for (const AssociationCandidate& c : candidates) ++start[c.observation + 1];
+  best.assign(z, -1);
+  for (std::size_t k = 0; k < candidates.size(); ++k) {
+    const AssociationCandidate& c = candidates[k];
+    ++start[c.observation + 1];
+    std::int64_t& top = best[c.observation];
+    if (top < 0 || before(c, candidates[static_cast<std::size_t>(top)])) {
+      top = static_cast<std::int64_t>(k);
+    }
+  }
   for (std::size_t j = 0; j < z; ++j) start[j + 1] += start[j];
+  std::vector<double>& threshold = scratch.threshold;
+  threshold.assign(z, -kInf);
+  for (std::size_t j = 0; j < z; ++j) {
+    if (best[j] < 0) continue;
+    AssociationCandidate& c = candidates[static_cast<std::size_t>(best[j])];
+    if (c.tag != kBoundOnly || evaluate(c)) {
+      threshold[j] = c.log_likelihood;
+    } else {
+      c.tag = kDropped;
+    }
+  }
+  // Grouped by observation, the front filled from the start, the back from the end.
   std::vector<std::uint32_t>& front = scratch.front;
+  std::vector<std::uint32_t>& back = scratch.back;
   front.assign(start.begin(), start.end() - 1);
+  back.assign(start.begin() + 1, start.end());
   std::vector<AssociationCandidate>& grouped = scratch.grouped;
   grouped.resize(candidates.size());
-  for (const AssociationCandidate& c : candidates) grouped[front[c.observation]++] = c;
-  // Until a threshold is set, every candidate of j is in its front.
-  scratch.threshold.assign(z, -kInf);
-  scratch.best.assign(z, -1);
-  scratch.partitioned.assign(z, 0);
-  std::vector<double>& threshold = scratch.threshold;
-  std::vector<std::int64_t>& best = scratch.best;
+  for (const AssociationCandidate& c : candidates) {
+    const std::uint32_t j = c.observation;
+    if (c.log_likelihood >= threshold[j]) {
+      grouped[front[j]++] = c;
+    } else {
+      grouped[--back[j]] = c;
+    }
+  }
+  std::fill(best.begin(), best.end(), -1);
   double log_weight = 0.0;
   std::size_t assigned = 0;
   constexpr std::size_t kListed = 32;  // the taken slots, as in association.cc
@@ -112,8 +140,6 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
            assignment.end();
   };
   // Observation j's best pair on a free landmark (exact), as an index into `grouped`, or -1.
-  // The first exact value found becomes a threshold: the candidates with keys below it go
-  // behind the front, and are looked at again only if nothing in the front is left above it.
   const auto resolve = [&](std::size_t j) -> std::int64_t {
     const std::uint32_t last = start[j + 1];
     for (;;) {
@@ -136,20 +162,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
         continue;
       }
       if (c.tag != kBoundOnly) return top;
-      if (!evaluate(c)) {
-        c.tag = kDropped;
-        continue;
-      }
-      if (scratch.partitioned[j] == 0) {
-        scratch.partitioned[j] = 1;
-        const double e = c.log_likelihood;
-        const auto first = grouped.begin() + start[j];
-        front[j] = static_cast<std::uint32_t>(
-            std::partition(first, grouped.begin() + last,
-                           [e](const AssociationCandidate& a) { return a.log_likelihood >= e; }) -
-            grouped.begin());
-        threshold[j] = e;
-      }
+      if (!evaluate(c)) c.tag = kDropped;
     }
   };
   constexpr std::int64_t kUnknown = -1;
