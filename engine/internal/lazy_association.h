@@ -6,23 +6,25 @@
 //
 // The result is that of associate_maximum_likelihood on the exactly evaluated candidate list:
 // the same assignment and the same log weight (the same sum in the same order), and the
-// candidates left in the vector are every candidate of the observations that end "new" (their
-// nearest distance goes into the scan report) and the chosen pair of each other observation,
-// all exact (plus other exact ones). How: the greedy order takes, at each step, the largest
-// (ln p, then observation, then slot first) pair whose observation and landmark are both free,
-// so it is enough to know each free observation's best pair over free landmarks. Per
-// observation that is found lazily: the largest key (exact ln p or bound; at equal keys a bound
-// first, then the smaller slot) among its candidates on free landmarks; a bound on top is
-// evaluated (its exact ln p is at most the bound) and the search repeats; an exact value on top
-// is the best, since every bound below it, hence every exact ln p behind it, is smaller. The
-// pairs are then taken in the eager order, and the weight summed in it.
+// candidates left in the vector are, exact, the chosen pair of each associated observation and
+// every candidate of the observations that end "new" (their nearest distance goes into the scan
+// report). How: the greedy order takes, at each step, the largest (ln p, then observation, then
+// slot) pair whose observation and landmark are both free, so it is enough to know each free
+// observation's best pair over the free landmarks. Per observation that is found lazily: the
+// largest key (exact ln p or bound; at equal keys a bound first, then the smaller slot) among
+// its candidates on free landmarks; a bound on top is evaluated (its exact ln p is at most the
+// bound) and the search repeats; an exact value on top is the best, since every bound below it,
+// hence every exact ln p behind it, is smaller. Each observation's top candidate is needed in
+// any case; its exact value cuts the observation's candidates into a front, searched first,
+// and the rest, searched only when nothing in the front is left above the cut.
 //
 // `evaluate(c)`: given a candidate with tag == kBoundOnly, fills its exact log_likelihood, tag
 // and mahalanobis2 and returns true, or returns false when the exact candidate is not kept.
 // REQUIRES: a bounded candidate's log_likelihood >= its exact one; exact candidates' tags below
 // kDropped; observations below both assignment.size() and 2^31. Thread safety: a pure
-// function of its arguments and `evaluate`. Costs: O(C + Z^2 + E c) for C candidates, Z
-// observations, E evaluations and c the candidates of an observation near its best; no
+// function of its arguments and `evaluate`. Costs: O(C + Z log Z) plus, per evaluation and per
+// observation whose best landmark another took, a search of that observation's front (its
+// candidates with bounds above the cut); Z^2 at worst for the taken-landmark checks; no
 // allocation once the scratch has grown.
 #pragma once
 
@@ -51,6 +53,7 @@ struct LazyScratch {
   std::vector<std::uint32_t> back;
   std::vector<double> threshold;
   std::vector<std::int64_t> best;  // index into grouped of j's best free pair, or below 0
+  std::vector<std::uint32_t> order;  // the observations in the greedy order
 };
 
 namespace lazy_association_detail {
@@ -165,49 +168,63 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
       if (!evaluate(c)) c.tag = kDropped;
     }
   };
-  constexpr std::int64_t kUnknown = -1;
-  constexpr std::int64_t kFinished = -2;
-  // The greedy order: the largest best pair over the free observations (ties: the smaller
-  // observation), taken unless below its observation's "no landmark" score.
-  for (;;) {
-    std::size_t pick = z;
-    for (std::size_t j = 0; j < z; ++j) {
-      if (best[j] == kFinished) continue;
-      if (best[j] == kUnknown) {
-        const std::int64_t b = resolve(j);
-        best[j] = b < 0 ? kFinished : b;
-        if (b < 0) continue;
+  // The greedy order: the observations by their best pair (larger first; ties: the smaller
+  // observation). The first one's pair is the next the eager choice takes, unless another
+  // observation took its landmark since: then it looks again, and goes back in its place (its
+  // new best is no larger, and a stale best elsewhere in the order is no smaller than the
+  // truth, so the first one, once valid, is the largest of all). A pair below its
+  // observation's "no landmark" score leaves the observation new.
+  std::vector<std::uint32_t>& order = scratch.order;
+  order.clear();
+  for (std::size_t j = 0; j < z; ++j) {
+    best[j] = resolve(j);
+    if (best[j] >= 0) order.push_back(static_cast<std::uint32_t>(j));
+  }
+  const auto precedes = [&](std::uint32_t a, std::uint32_t b) {
+    const double la = grouped[static_cast<std::size_t>(best[a])].log_likelihood;
+    const double lb = grouped[static_cast<std::size_t>(best[b])].log_likelihood;
+    return la > lb || (la == lb && a < b);
+  };
+  std::sort(order.begin(), order.end(), precedes);
+  for (std::size_t p = 0; p < order.size();) {
+    const std::uint32_t j = order[p];
+    AssociationCandidate& cand = grouped[static_cast<std::size_t>(best[j])];
+    if (assigned > 0 && taken(cand.slot)) {
+      cand.observation |= kBlocked;
+      best[j] = resolve(j);
+      if (best[j] < 0) {
+        ++p;
+        continue;
       }
-      if (pick == z || grouped[static_cast<std::size_t>(best[j])].log_likelihood >
-                           grouped[static_cast<std::size_t>(best[pick])].log_likelihood) {
-        pick = j;
+      std::size_t q = p;
+      while (q + 1 < order.size() && precedes(order[q + 1], j)) {
+        order[q] = order[q + 1];
+        ++q;
       }
+      order[q] = j;
+      continue;
     }
-    if (pick == z) break;
-    const AssociationCandidate& cand = grouped[static_cast<std::size_t>(best[pick])];
-    best[pick] = kFinished;
-    if (cand.log_likelihood < log_unassociated(pick)) continue;  // j stays new
-    assignment[pick] = cand.slot;
+    ++p;
+    if (cand.log_likelihood < log_unassociated(j)) continue;  // j stays new
+    assignment[j] = cand.slot;
     log_weight += cand.log_likelihood;
     if (assigned < kListed) taken_slots[assigned] = cand.slot;
     ++assigned;
-    // The observations whose best pair was on this landmark look again.
-    for (std::size_t j = 0; j < z; ++j) {
-      if (best[j] >= 0 && grouped[static_cast<std::size_t>(best[j])].slot == cand.slot) {
-        grouped[static_cast<std::size_t>(best[j])].observation |= kBlocked;
-        best[j] = kUnknown;
-      }
-    }
   }
-  // The observations left new: all their candidates, exact (the report's nearest distance).
-  // Then the exact candidates go back to `candidates`.
+  // What the scan report and the map update read: the chosen pairs, and every candidate of the
+  // observations left new, exact.
   candidates.clear();
   for (std::size_t j = 0; j < z; ++j) {
-    const bool is_new = assignment[j] == kNewLandmark;
+    if (assignment[j] != kNewLandmark) {
+      AssociationCandidate c = grouped[static_cast<std::size_t>(best[j])];
+      c.observation &= ~kBlocked;
+      candidates.push_back(c);
+      continue;
+    }
     for (std::uint32_t k = start[j]; k < start[j + 1]; ++k) {
       AssociationCandidate& c = grouped[k];
       c.observation &= ~kBlocked;
-      if (is_new && c.tag == kBoundOnly && !evaluate(c)) c.tag = kDropped;
+      if (c.tag == kBoundOnly && !evaluate(c)) c.tag = kDropped;
       if (c.tag < kDropped) candidates.push_back(c);
     }
   }
