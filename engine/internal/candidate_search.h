@@ -165,9 +165,12 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
     scratch.queries[j] = {at_x, at_y, radius};
     scratch.directions[j] = {(at_x - from[0]) / scan[j].z[0], (at_y - from[1]) / scan[j].z[0]};
   }
-  const double scale2 = in.search_scale * in.search_scale;
-  const auto reach2 = [&](std::size_t j, float extent) {
-    return scale2 * gate * (static_cast<double>(extent) + scratch.discs[j][3]);
+  // By value: the visits below write to the scratch, so a reference would be reloaded per
+  // entry. The product is the same as scale2 * gate * (...), which multiplies left to right.
+  const double reach_scale = in.search_scale * in.search_scale * gate;
+  const std::array<double, 4>* const discs = scratch.discs.data();
+  const auto reach2 = [reach_scale, discs](std::size_t j, float extent) {
+    return reach_scale * (static_cast<double>(extent) + discs[j][3]);
   };
   index.within_reach(
       near, scratch.queries, reach2, [&](std::size_t j, const memory::SpatialEntry& e) {
