@@ -175,21 +175,22 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
   index.within_reach(
       near, scratch.queries, reach2, [&](std::size_t j, const memory::SpatialEntry& e) {
         const Eigen::Vector2d& z = scan[j].z;
-        if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
         const auto obs = static_cast<std::uint32_t>(j);
+        double bound = 0.0;
         if constexpr (!kFs2) {
-          const double bound = range_bearing_mahalanobis2_bound(
-              from, scratch.directions[j], z[0], e.x, e.y, static_cast<double>(e.extent), in.r);
+          bound = range_bearing_mahalanobis2_bound(from, scratch.directions[j], z[0], e.x, e.y,
+                                                   static_cast<double>(e.extent), in.r);
           if (bound > bound_limit) return;
-          if constexpr (kMl) {
-            // ln p = -ln 2 pi - ln det Q / 2 - m^2 / 2 <= log_peak - bound / 2, with a margin
-            // far above the rounding of either side.
-            const double high = log_peak - 0.5 * bound;
-            scratch.candidates.push_back(
-                {obs, e.slot, high + 1e-6 * (std::fabs(high) + bound + 1.0), kBoundOnly, 0.0f});
-            ++scratch.counts[j];
-            return;
-          }
+        }
+        if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
+        if constexpr (!kFs2 && kMl) {
+          // ln p = -ln 2 pi - ln det Q / 2 - m^2 / 2 <= log_peak - bound / 2, with a margin far
+          // above the rounding of either side.
+          const double high = log_peak - 0.5 * bound;
+          scratch.candidates.push_back(
+              {obs, e.slot, high + 1e-6 * (std::fabs(high) + bound + 1.0), kBoundOnly, 0.0f});
+          ++scratch.counts[j];
+          return;
         }
         if constexpr (kFs2) {
           const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
