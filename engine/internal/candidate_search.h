@@ -79,8 +79,8 @@ bool evaluate_candidate(const SearchInput& in, const Pose& pose, const memory::L
                         const std::vector<PlannedObservation>& scan, AssociationCandidate& c,
                         std::vector<LandmarkObservation>& terms) {
   const LandmarkGaussian lm = to_gaussian(map.at(c.slot));
-  const LandmarkObservation t = evaluate_observation(*in.sensor, lm, pose, scan[c.observation].z,
-                                                     in.r);
+  const LandmarkObservation t =
+      evaluate_observation(*in.sensor, lm, pose, scan[c.observation].z, in.r);
   if (!(t.mahalanobis2 <= in.gate) || (kMl && t.log_likelihood < in.log_p0)) return false;
   c.log_likelihood = t.log_likelihood;
   c.tag = static_cast<std::uint32_t>(terms.size());
@@ -185,10 +185,12 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
         if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
         if constexpr (!kFs2 && kMl) {
           // ln p = -ln 2 pi - ln det Q / 2 - m^2 / 2 <= log_peak - bound / 2, with a margin far
-          // above the rounding of either side.
+          // above the rounding of either side (no bound, +inf, from a NaN extent).
           const double high = log_peak - 0.5 * bound;
+          const double key = high + 1e-6 * (std::fabs(high) + bound + 1.0);
+          constexpr double kNoBound = std::numeric_limits<double>::infinity();
           scratch.candidates.push_back(
-              {obs, e.slot, high + 1e-6 * (std::fabs(high) + bound + 1.0), kBoundOnly, 0.0f});
+              {obs, e.slot, std::isnan(key) ? kNoBound : key, kBoundOnly, 0.0f});
           ++scratch.counts[j];
           return;
         }
@@ -235,8 +237,8 @@ double choose(const SearchInput& in, const PoseGaussian<N>& prior, const memory:
   }
   if constexpr (std::is_same_v<Unassociated, double>) {
     return lazy_maximum_likelihood(
-        candidates, [log_unassociated](std::size_t) { return log_unassociated; }, true,
-        assignment, scratch.lazy, evaluate);
+        candidates, [log_unassociated](std::size_t) { return log_unassociated; }, true, assignment,
+        scratch.lazy, evaluate);
   } else {
     return lazy_maximum_likelihood(
         candidates, [log_unassociated](std::size_t j) { return log_unassociated[j]; }, false,
@@ -282,8 +284,8 @@ void evaluate_all(const SearchInput& in, const PoseGaussian<N>& prior,
   const Pose pose = prior.mean.template head<3>();
   std::size_t kept = 0;
   for (AssociationCandidate& c : scratch.candidates) {
-    if (c.tag != kBoundOnly || candidate_search_detail::evaluate_candidate<true>(
-                                   in, pose, map, scan, c, scratch.terms)) {
+    if (c.tag != kBoundOnly ||
+        candidate_search_detail::evaluate_candidate<true>(in, pose, map, scan, c, scratch.terms)) {
       scratch.candidates[kept++] = c;
     }
   }

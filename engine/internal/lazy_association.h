@@ -52,7 +52,7 @@ struct LazyScratch {
   std::vector<std::uint32_t> front;           // [start[j], front[j]): keys >= threshold[j]
   std::vector<std::uint32_t> back;
   std::vector<double> threshold;
-  std::vector<std::int64_t> best;  // index into grouped of j's best free pair, or below 0
+  std::vector<std::int64_t> best;    // index into grouped of j's best free pair, or below 0
   std::vector<std::uint32_t> order;  // the observations in the greedy order
 };
 

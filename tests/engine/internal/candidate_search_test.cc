@@ -189,8 +189,7 @@ TEST(CandidateSearchTest, FastSlam1MaximumLikelihoodChoiceIsTheEagerOne) {
       const double got_w =
           per_observation
               ? choose_maximum_likelihood<3>(w.in, prior, w.map, w.scan, scratch, scores, got)
-              : choose_maximum_likelihood<3>(w.in, prior, w.map, w.scan, scratch, w.in.log_p0,
-                                             got);
+              : choose_maximum_likelihood<3>(w.in, prior, w.map, w.scan, scratch, w.in.log_p0, got);
       EXPECT_EQ(got, want);
       EXPECT_EQ(got_w, want_w);
       // What the report reads: per observation the chosen pair's distance, or for a new one the
@@ -212,8 +211,9 @@ TEST(CandidateSearchTest, FastSlam1MaximumLikelihoodChoiceIsTheEagerOne) {
         EXPECT_EQ(scratch.terms[c.tag].log_likelihood, c.log_likelihood);
         chosen_terms += got[c.observation] == c.slot ? 1 : 0;
       }
-      EXPECT_EQ(chosen_terms, static_cast<std::size_t>(std::count_if(
-                                  got.begin(), got.end(), [](auto a) { return a != kNewLandmark; })));
+      EXPECT_EQ(chosen_terms,
+                static_cast<std::size_t>(std::count_if(got.begin(), got.end(),
+                                                       [](auto a) { return a != kNewLandmark; })));
       EXPECT_LT(scratch.terms.size(), eager.size());  // some were never evaluated
     }
   }

@@ -37,8 +37,8 @@ struct Scan {
   std::uint32_t observations = 0;
   std::vector<Truth> truth;  // by the pair's index, the tag its evaluation gives
   std::map<std::pair<std::uint32_t, memory::Slot>, std::uint32_t> index;  // pair -> index
-  Candidates lazy;           // what the lazy choice starts from: some exact, most bounded
-  Candidates eager;          // the oracle's input: every kept candidate, exact
+  Candidates lazy;   // what the lazy choice starts from: some exact, most bounded
+  Candidates eager;  // the oracle's input: every kept candidate, exact
 };
 
 Key key_of(const AssociationCandidate& c) {
