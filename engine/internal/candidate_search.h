@@ -11,9 +11,14 @@
 // since det Q >= det R, neither is one whose m^2 exceeds 2 (-ln 2 pi - ln det R / 2 - ln p0).
 // FastSLAM 2.0 scores candidates with the pose integrated out (eq. 60-61); 1.0 keeps each
 // candidate's EKF terms (tag = index into `terms`) for the update.
+// FastSLAM 1.0 under maximum likelihood defers the exact terms: the search keeps each candidate
+// that passes the bounds with an upper bound on its ln p (tag kBoundOnly, lazy_association.h),
+// from the same two bounds (m^2 >= the Mahalanobis bound, det Q >= det R), and
+// `choose_maximum_likelihood` evaluates only those the greedy choice or the scan report needs;
+// most candidates of a dense patch cannot win and are never evaluated.
 // Thread safety: reads the map and index; concurrent calls with distinct scratch are safe.
-// Costs: O(h + k) index work and O(c) exact gates for k entries reached and c near enough; no
-// allocation once the scratch has grown.
+// Costs: O(h + k) index work and O(c) exact gates for k entries reached and c near enough (1.0
+// ML: the c evaluated by the choice); no allocation once the scratch has grown.
 #pragma once
 
 #include <algorithm>
@@ -21,11 +26,14 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <span>
+#include <type_traits>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "engine/association.h"
+#include "engine/internal/lazy_association.h"
 #include "engine/internal/scan_plan.h"
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
@@ -45,6 +53,8 @@ struct CandidateScratch {
   std::vector<std::array<double, 4>> discs;
   std::vector<memory::SpatialIndex::Disc> queries;  // the discs as the index takes them
   std::vector<Eigen::Vector2d> directions;          // observation j's bearing in the world
+  std::vector<std::uint32_t> counts;                // 1.0 ML: candidates of observation j
+  LazyScratch lazy;                                 // 1.0 ML: the choice's
 };
 
 // What the search reads besides the particle.
@@ -60,6 +70,24 @@ struct SearchInput {
 };
 
 namespace candidate_search_detail {
+
+// FastSLAM 1.0's exact terms of candidate `c` (observation c.observation, landmark c.slot) seen
+// from `pose`: appends them to `terms` and fills c's log-likelihood, tag and distance; false,
+// appending nothing, when the exact gate (or, under ML, the ln p0 floor) rejects it.
+template <bool kMl>
+bool evaluate_candidate(const SearchInput& in, const Pose& pose, const memory::LandmarkTree& map,
+                        const std::vector<PlannedObservation>& scan, AssociationCandidate& c,
+                        std::vector<LandmarkObservation>& terms) {
+  const LandmarkGaussian lm = to_gaussian(map.at(c.slot));
+  const LandmarkObservation t =
+      evaluate_observation(*in.sensor, lm, pose, scan[c.observation].z, in.r);
+  if (!(t.mahalanobis2 <= in.gate) || (kMl && t.log_likelihood < in.log_p0)) return false;
+  c.log_likelihood = t.log_likelihood;
+  c.tag = static_cast<std::uint32_t>(terms.size());
+  c.mahalanobis2 = static_cast<float>(t.mahalanobis2);
+  terms.push_back(t);
+  return true;
+}
 
 // The scan's discs (scratch.discs) around pose `pose`; returns the bounding box of them all
 // (min x, min y, max x, max y).
@@ -96,7 +124,9 @@ std::array<double, 4> plan_discs(const SearchInput& in, const Pose& pose,
 
 // Fills scratch.candidates (and, for 1.0, scratch.terms) for `scan` against the particle's map
 // and index. `prior` is the particle's state (2.0: with its predicted covariance); its first
-// three components are the pose the observations are taken from.
+// three components are the pose the observations are taken from. FastSLAM 1.0 under maximum
+// likelihood: the candidates carry bounds (tag kBoundOnly) and scratch.terms stays empty until
+// choose_maximum_likelihood (or evaluate_all) evaluates them.
 template <int N, bool kFs2, bool kMl>
 void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
                      const memory::LandmarkTree& map, const memory::SpatialIndex& index,
@@ -118,52 +148,148 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
   const double gate = in.gate;
   const double log_p0 = in.log_p0;
   double limit = gate;
+  double log_peak = 0.0;  // the largest ln p any candidate can have: -ln 2 pi - ln det R / 2
   if constexpr (kMl) {
     const double log_det_r = std::log(in.r(0, 0) * in.r(1, 1) - in.r(0, 1) * in.r(1, 0));
-    limit = std::min(limit, 2.0 * (-kLogTwoPi - 0.5 * log_det_r - log_p0));
+    log_peak = -kLogTwoPi - 0.5 * log_det_r;
+    limit = std::min(limit, 2.0 * (log_peak - log_p0));
   }
   // The margin lies far above the bound's rounding and that of ln det.
   const double bound_limit = limit + 1e-6 * (std::fabs(limit) + 1.0);
   // The observed directions (unit, to rounding): at = sensor position + z_r (cos, sin).
   scratch.queries.resize(scan.size());
   scratch.directions.resize(scan.size());
+  if constexpr (kMl && !kFs2) scratch.counts.assign(scan.size(), 0);
   for (std::size_t j = 0; j < scan.size(); ++j) {
     const auto [at_x, at_y, radius, spread] = scratch.discs[j];
     scratch.queries[j] = {at_x, at_y, radius};
     scratch.directions[j] = {(at_x - from[0]) / scan[j].z[0], (at_y - from[1]) / scan[j].z[0]};
   }
-  const double scale2 = in.search_scale * in.search_scale;
-  const auto reach2 = [&](std::size_t j, float extent) {
-    return scale2 * gate * (static_cast<double>(extent) + scratch.discs[j][3]);
+  // By value: the visits below write to the scratch, so a reference would be reloaded per
+  // entry. The product is the same as scale2 * gate * (...), which multiplies left to right.
+  const double reach_scale = in.search_scale * in.search_scale * gate;
+  const std::array<double, 4>* const discs = scratch.discs.data();
+  const auto reach2 = [reach_scale, discs](std::size_t j, float extent) {
+    return reach_scale * (static_cast<double>(extent) + discs[j][3]);
   };
   index.within_reach(
       near, scratch.queries, reach2, [&](std::size_t j, const memory::SpatialEntry& e) {
         const Eigen::Vector2d& z = scan[j].z;
-        if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
-        if constexpr (!kFs2) {
-          if (range_bearing_mahalanobis2_bound(from, scratch.directions[j], z[0], e.x, e.y,
-                                               static_cast<double>(e.extent), in.r) > bound_limit) {
-            return;
-          }
-        }
-        const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
         const auto obs = static_cast<std::uint32_t>(j);
+        double bound = 0.0;
+        if constexpr (!kFs2) {
+          bound = range_bearing_mahalanobis2_bound(from, scratch.directions[j], z[0], e.x, e.y,
+                                                   static_cast<double>(e.extent), in.r);
+          if (bound > bound_limit) return;
+        }
+        if ((Eigen::Vector2d(e.x, e.y) - from).squaredNorm() < 1e-18) return;  // g undefined
+        if constexpr (!kFs2 && kMl) {
+          // ln p = -ln 2 pi - ln det Q / 2 - m^2 / 2 <= log_peak - bound / 2, with a margin far
+          // above the rounding of either side (no bound, +inf, from a NaN extent).
+          const double high = log_peak - 0.5 * bound;
+          const double key = high + 1e-6 * (std::fabs(high) + bound + 1.0);
+          constexpr double kNoBound = std::numeric_limits<double>::infinity();
+          scratch.candidates.push_back(
+              {obs, e.slot, std::isnan(key) ? kNoBound : key, kBoundOnly, 0.0f});
+          ++scratch.counts[j];
+          return;
+        }
         if constexpr (kFs2) {
+          const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
           const ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, in.r);
           if (t.mahalanobis2 <= gate && !(kMl && t.log_likelihood < log_p0)) {
             scratch.candidates.push_back(
                 {obs, e.slot, t.log_likelihood, 0, static_cast<float>(t.mahalanobis2)});
           }
         } else {
-          const LandmarkObservation t = evaluate_observation(sensor, lm, pose, z, in.r);
-          if (t.mahalanobis2 <= gate && !(kMl && t.log_likelihood < log_p0)) {
-            const auto tag = static_cast<std::uint32_t>(scratch.terms.size());
-            scratch.terms.push_back(t);
-            scratch.candidates.push_back(
-                {obs, e.slot, t.log_likelihood, tag, static_cast<float>(t.mahalanobis2)});
+          AssociationCandidate c{obs, e.slot, 0.0, 0, 0.0f};
+          if (candidate_search_detail::evaluate_candidate<kMl>(in, pose, map, scan, c,
+                                                               scratch.terms)) {
+            scratch.candidates.push_back(c);
           }
         }
       });
+}
+
+namespace candidate_search_detail {
+
+// choose_maximum_likelihood's body: `Unassociated` as association.h's overloads take it.
+template <int N, class Unassociated>
+double choose(const SearchInput& in, const PoseGaussian<N>& prior, const memory::LandmarkTree& map,
+              const std::vector<PlannedObservation>& scan, CandidateScratch& scratch,
+              const Unassociated& log_unassociated, std::span<std::int64_t> assignment) {
+  const Pose pose = prior.mean.template head<3>();
+  const auto evaluate = [&](AssociationCandidate& c) {
+    return evaluate_candidate<true>(in, pose, map, scan, c, scratch.terms);
+  };
+  // When no observation has more than one candidate, each is needed whatever the others do
+  // (it is taken, or its observation ends new and the report reads its distance): all are
+  // evaluated, and the plain sort is cheaper than the lazy choice.
+  std::vector<AssociationCandidate>& candidates = scratch.candidates;
+  if (std::all_of(scratch.counts.begin(), scratch.counts.end(),
+                  [](std::uint32_t n) { return n <= 1; })) {
+    std::size_t kept = 0;
+    for (AssociationCandidate& c : candidates) {
+      if (evaluate(c)) candidates[kept++] = c;
+    }
+    candidates.resize(kept);
+    return associate_maximum_likelihood(candidates, log_unassociated, assignment);
+  }
+  if constexpr (std::is_same_v<Unassociated, double>) {
+    return lazy_maximum_likelihood(
+        candidates, [log_unassociated](std::size_t) { return log_unassociated; }, true, assignment,
+        scratch.lazy, evaluate);
+  } else {
+    return lazy_maximum_likelihood(
+        candidates, [log_unassociated](std::size_t j) { return log_unassociated[j]; }, false,
+        assignment, scratch.lazy, evaluate);
+  }
+}
+
+}  // namespace candidate_search_detail
+
+// FastSLAM 1.0, maximum likelihood: the choice of associate_maximum_likelihood over
+// find_candidates<N, false, true>'s bounded candidates (same `in`, `prior`, map and scan),
+// evaluating only those it needs (lazy_association.h). Leaves in scratch.candidates the exact
+// candidates the scan report and the map update read (every candidate of an observation left
+// new, the chosen pair of the others; tag = index into scratch.terms). Returns the log weight
+// factor, bit-identical to associate_maximum_likelihood's on the fully evaluated list.
+template <int N>
+double choose_maximum_likelihood(const SearchInput& in, const PoseGaussian<N>& prior,
+                                 const memory::LandmarkTree& map,
+                                 const std::vector<PlannedObservation>& scan,
+                                 CandidateScratch& scratch, double log_new_landmark,
+                                 std::span<std::int64_t> assignment) {
+  return candidate_search_detail::choose<N>(in, prior, map, scan, scratch, log_new_landmark,
+                                            assignment);
+}
+// The same with observation j's "no landmark" scored log_unassociated[j] (association.h).
+template <int N>
+double choose_maximum_likelihood(const SearchInput& in, const PoseGaussian<N>& prior,
+                                 const memory::LandmarkTree& map,
+                                 const std::vector<PlannedObservation>& scan,
+                                 CandidateScratch& scratch,
+                                 std::span<const double> log_unassociated,
+                                 std::span<std::int64_t> assignment) {
+  return candidate_search_detail::choose<N>(in, prior, map, scan, scratch, log_unassociated,
+                                            assignment);
+}
+
+// Evaluates every bounded candidate of find_candidates<N, false, true> (dropping those the exact
+// gate or the ln p0 floor rejects): the list the eager search gave. For tests and tools.
+template <int N>
+void evaluate_all(const SearchInput& in, const PoseGaussian<N>& prior,
+                  const memory::LandmarkTree& map, const std::vector<PlannedObservation>& scan,
+                  CandidateScratch& scratch) {
+  const Pose pose = prior.mean.template head<3>();
+  std::size_t kept = 0;
+  for (AssociationCandidate& c : scratch.candidates) {
+    if (c.tag != kBoundOnly ||
+        candidate_search_detail::evaluate_candidate<true>(in, pose, map, scan, c, scratch.terms)) {
+      scratch.candidates[kept++] = c;
+    }
+  }
+  scratch.candidates.resize(kept);
 }
 
 }  // namespace fastslam::engine::internal

@@ -212,7 +212,12 @@ class ParticlePass final : public Pass {
     const double log_p0 = s_.config.log_new_landmark;
     const std::span<const double> unassociated(log_unassociated_);
     double log_w;
-    if constexpr (kMl) {
+    if constexpr (kMl && !kFs2) {  // the candidates carry bounds, evaluated as needed
+      log_w = detection_model_ ? choose_maximum_likelihood<N>(in.search, prior, map, scan,
+                                                              scratch.search, unassociated, chosen)
+                               : choose_maximum_likelihood<N>(in.search, prior, map, scan,
+                                                              scratch.search, log_p0, chosen);
+    } else if constexpr (kMl) {
       log_w = detection_model_
                   ? associate_maximum_likelihood(scratch.search.candidates, unassociated, chosen)
                   : associate_maximum_likelihood(scratch.search.candidates, log_p0, chosen);

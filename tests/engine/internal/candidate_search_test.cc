@@ -2,11 +2,15 @@
 // observation with the exact gate (FastSLAM 1.0: the EKF terms at the pose; 2.0: the proposal
 // terms with the pose integrated out) and, under maximum likelihood, the ln p0 floor. The disc
 // search, the extent bound and the Mahalanobis bound must keep exactly those candidates, with the
-// same log-likelihoods, and 1.0's tags must point at their terms.
+// same log-likelihoods, and 1.0's tags must point at their terms (1.0 under maximum likelihood
+// once evaluate_all has evaluated the bounded candidates; each bound at or above the exact ln p).
+// choose_maximum_likelihood against associate_maximum_likelihood on the brute-force list: the
+// same assignment, the bit-identical weight, and the candidates the scan report reads.
 #include "engine/internal/candidate_search.h"
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <tuple>
 #include <vector>
@@ -111,6 +115,11 @@ void expect_search_is_brute_force(std::uint64_t seed) {
   }
   CandidateScratch scratch;
   find_candidates<N, kFs2, kMl>(w.in, prior, w.map, w.index, w.scan, scratch);
+  if constexpr (!kFs2 && kMl) {
+    EXPECT_TRUE(scratch.terms.empty());  // deferred: bounds only
+    for (const AssociationCandidate& c : scratch.candidates) ASSERT_EQ(c.tag, kBoundOnly);
+    evaluate_all<N>(w.in, prior, w.map, w.scan, scratch);
+  }
   std::vector<Key> got;
   for (const AssociationCandidate& c : scratch.candidates) {
     got.emplace_back(c.observation, c.slot, c.log_likelihood);
@@ -129,6 +138,84 @@ TEST(CandidateSearchTest, FastSlam1IsBruteForce) {
   for (std::uint64_t seed : {1, 2, 3}) {
     expect_search_is_brute_force<3, false, true>(seed);
     expect_search_is_brute_force<3, false, false>(seed);
+  }
+}
+
+// The bounds find_candidates gives hold: each at or above the exact ln p of its pair.
+TEST(CandidateSearchTest, FastSlam1MaximumLikelihoodBoundsHold) {
+  for (std::uint64_t seed : {1, 2, 3}) {
+    World w(seed);
+    PoseGaussian<3> prior;
+    prior.mean = w.pose;
+    CandidateScratch scratch;
+    find_candidates<3, false, true>(w.in, prior, w.map, w.index, w.scan, scratch);
+    const std::vector<AssociationCandidate> bounded = scratch.candidates;
+    evaluate_all<3>(w.in, prior, w.map, w.scan, scratch);
+    for (const AssociationCandidate& c : scratch.candidates) {
+      const auto b = std::find_if(bounded.begin(), bounded.end(), [&](const auto& o) {
+        return o.observation == c.observation && o.slot == c.slot;
+      });
+      ASSERT_NE(b, bounded.end());
+      EXPECT_GE(b->log_likelihood, c.log_likelihood);
+    }
+  }
+}
+
+// The lazy choice over the search's bounds against the eager choice over the brute-force list.
+TEST(CandidateSearchTest, FastSlam1MaximumLikelihoodChoiceIsTheEagerOne) {
+  for (std::uint64_t seed : {1, 2, 3, 6, 7}) {
+    for (const bool per_observation : {false, true}) {
+      World w(seed);
+      PoseGaussian<3> prior;
+      prior.mean = w.pose;
+      // The eager list: brute force, with the exact terms' distances.
+      std::vector<AssociationCandidate> eager;
+      for (const auto& [j, slot, ll] : brute_force<3, false, true>(w, prior)) {
+        const auto t = evaluate_observation(w.sensor, to_gaussian(w.map.at(slot)), w.pose,
+                                            w.scan[j].z, w.in.r);
+        eager.push_back({j, slot, ll, 0, static_cast<float>(t.mahalanobis2)});
+      }
+      std::vector<double> scores(w.scan.size(), w.in.log_p0);
+      for (std::size_t j = 0; j < scores.size(); ++j) {
+        if (per_observation) scores[j] += 3.0 * static_cast<double>(j % 3);
+      }
+      std::vector<std::int64_t> want(w.scan.size());
+      const double want_w = per_observation
+                                ? associate_maximum_likelihood(eager, scores, want)
+                                : associate_maximum_likelihood(eager, w.in.log_p0, want);
+      CandidateScratch scratch;
+      find_candidates<3, false, true>(w.in, prior, w.map, w.index, w.scan, scratch);
+      std::vector<std::int64_t> got(w.scan.size());
+      const double got_w =
+          per_observation
+              ? choose_maximum_likelihood<3>(w.in, prior, w.map, w.scan, scratch, scores, got)
+              : choose_maximum_likelihood<3>(w.in, prior, w.map, w.scan, scratch, w.in.log_p0, got);
+      EXPECT_EQ(got, want);
+      EXPECT_EQ(got_w, want_w);
+      // What the report reads: per observation the chosen pair's distance, or for a new one the
+      // nearest candidate's; and the chosen pairs' terms.
+      const auto report = [&](const std::vector<AssociationCandidate>& c) {
+        std::vector<double> d2(w.scan.size(), std::numeric_limits<double>::infinity());
+        for (const AssociationCandidate& a : c) {
+          if (got[a.observation] == a.slot) d2[a.observation] = a.mahalanobis2;
+          if (got[a.observation] == kNewLandmark) {
+            d2[a.observation] = std::min<double>(d2[a.observation], a.mahalanobis2);
+          }
+        }
+        return d2;
+      };
+      EXPECT_EQ(report(scratch.candidates), report(eager));
+      std::size_t chosen_terms = 0;
+      for (const AssociationCandidate& c : scratch.candidates) {
+        ASSERT_LT(c.tag, scratch.terms.size());
+        EXPECT_EQ(scratch.terms[c.tag].log_likelihood, c.log_likelihood);
+        chosen_terms += got[c.observation] == c.slot ? 1 : 0;
+      }
+      EXPECT_EQ(chosen_terms,
+                static_cast<std::size_t>(std::count_if(got.begin(), got.end(),
+                                                       [](auto a) { return a != kNewLandmark; })));
+      EXPECT_LT(scratch.terms.size(), eager.size());  // some were never evaluated
+    }
   }
 }
 
