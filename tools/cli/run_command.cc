@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -169,6 +170,34 @@ struct RankStatus {
   int signal = 0;
   int out_of_time = 0;
   int failed = 0;
+  int input_over = 0;         // the run ends here: the source ended (or failed), or --max-steps
+  std::uint64_t input = 0;    // InputDigest of the events read so far
+};
+
+// A running digest (FNV-1a) of the events a rank has read, so ranks that read different input
+// (a file that differs between nodes, other options in an MPMD launch) find out at the next
+// event instead of computing on it.
+class InputDigest {
+ public:
+  void add(const Event& e, std::span<const engine::Observation> scan) {
+    mix(static_cast<std::uint64_t>(e.kind));
+    for (const double v : {e.time, e.dt, e.control.u0, e.control.u1, e.x, e.y, e.theta}) mix(v);
+    if (e.kind != EventKind::kScan) return;
+    mix(static_cast<std::uint64_t>(scan.size()));
+    for (const engine::Observation& z : scan) {
+      mix(z.range);
+      mix(z.bearing);
+      mix(static_cast<std::uint64_t>(z.id));
+    }
+  }
+  std::uint64_t value() const noexcept { return h_; }
+
+ private:
+  void mix(double v) { mix(std::bit_cast<std::uint64_t>(v)); }
+  void mix(std::uint64_t v) {
+    for (int k = 0; k < 8; ++k, v >>= 8) h_ = (h_ ^ (v & 0xffu)) * 0x100000001b3ull;
+  }
+  std::uint64_t h_ = 0xcbf29ce484222325ull;
 };
 
 // `st` with the phase timings of the run before a resume added.
@@ -342,6 +371,8 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
       r.failure = e.what();
     }
   };
+  InputDigest input;
+  bool input_over = false;  // over ranks: this rank's run ends here; the ranks agree below
   for (std::uint64_t index = loop.start.events;; ++index) {
     const auto t0 = Clock::now();
     int signal = interrupt_signal();
@@ -349,8 +380,10 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
                                                        *loop.options.max_seconds;
     if (loop.group != nullptr) {
       // Ranks stop at the same event: a rank leaving alone would hang the others' collective
-      // calls. The first signal in rank order, any rank out of time, any rank failed.
-      const RankStatus mine{signal, out_of_time ? 1 : 0, r.failure ? 1 : 0};
+      // calls. The first signal in rank order, any rank out of time, any rank failed; and they
+      // must have read the same events, to the same end.
+      const RankStatus mine{signal, out_of_time ? 1 : 0, r.failure ? 1 : 0, input_over ? 1 : 0,
+                            input.value()};
       const std::vector<RankStatus> all = parallel::all_gather_value(*loop.group, mine);
       signal = 0;
       out_of_time = false;
@@ -359,10 +392,19 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
           r.ended_by = "error";
           if (!r.failure) r.failure = "rank " + std::to_string(k) + " failed (its error is above)";
         }
+        if (!r.failure && (all[k].input != all[0].input || all[k].input_over != all[0].input_over)) {
+          r.ended_by = "error";
+          r.failure = "the ranks read different input: by event " + std::to_string(index) +
+                      " of the source, rank " + std::to_string(k) +
+                      (all[k].input_over != all[0].input_over ? "'s run ended where rank 0's did not"
+                                                              : "'s events differ from rank 0's") +
+                      "; every rank must read the same source with the same options (a recorded "
+                      "data set on a file system every node shares)";
+        }
         if (signal == 0) signal = all[k].signal;
         out_of_time = out_of_time || all[k].out_of_time != 0;
       }
-      if (r.failure) break;
+      if (r.failure || input_over) break;
     }
     if (signal != 0) {
       r.interrupted_by = signal;
@@ -374,14 +416,21 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
       break;
     }
     try {
-      if (!loop.source.next(event, scan)) break;
+      if (!loop.source.next(event, scan)) {
+        if (loop.group == nullptr) break;
+        input_over = true;  // the ranks agree that every source ended here, at the next gather
+        continue;
+      }
     } catch (const std::runtime_error& e) {
       // A record the source cannot read (a pipe's malformed line): the run ends here and
       // reports what it has; run_once raises the error once the results are written.
       r.ended_by = "input error";
       r.input_error = e.what();
-      break;
+      if (loop.group == nullptr) break;
+      input_over = true;
+      continue;
     }
+    if (loop.group != nullptr) input.add(event, scan);
     const auto t1 = Clock::now();
     double trace_seconds = 0.0;
     // What the filter refuses (std::invalid_argument: the record, the filter unchanged) or fails
@@ -476,7 +525,10 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     r.source_seconds += std::chrono::duration<double>(t1 - t0).count();
     r.filter_seconds += seconds_since(t1);
     r.filter_seconds -= trace_seconds;
-    if (r.ended_by != "end of data") break;
+    if (r.ended_by != "end of data") {
+      if (loop.group == nullptr) break;
+      input_over = true;  // --max-steps: agreed at the next gather, as the input's end
+    }
   }
   const auto t_end = Clock::now();
   try {

@@ -2,7 +2,8 @@
 """`fastslam run` under `mpirun`: the run's particles spread over 2, 3 and 4 ranks
 (oversubscribed) write, from rank 0 alone, every file the one-process run writes, byte for byte,
 and metrics.json too but for the fields that measure the process; --max-seconds and SIGINT stop
-every rank at the same event; what is refused over ranks (--checkpoint, --trace, the EKF
+every rank at the same event; ranks that read different input all stop with the reason; what is
+refused over ranks (--checkpoint, --trace, the EKF
 baseline, fewer particle blocks than ranks) makes every rank exit 1 with the reason, none left
 waiting.
 
@@ -96,6 +97,25 @@ class RunOverRanksTest(unittest.TestCase):
                 self.assertNotEqual(r.returncode, 0)
                 self.assertIn(needle, r.stderr)
                 self.assertFalse(os.path.exists(os.path.join(out, "metrics.json")))
+
+    def test_ranks_that_read_different_input_stop_together_with_the_reason(self):
+        # An MPMD launch: rank 1 simulates another seed (as a data file that differs between
+        # nodes would), or ends its run early.
+        assert WORLD[-2:] == ["--max-steps", "300"]
+        cases = [(WORLD + ["--seed", "2"], "'s events differ from rank 0's"),
+                 (WORLD[:-2] + ["--max-steps", "150"], "'s run ended where rank 0's did not")]
+        for rank1, needle in cases:
+            with self.subTest(rank1=rank1[-2:]):
+                out = self.path("differ")
+                cmd = ["mpirun", "--oversubscribe"] + (
+                    ["--allow-run-as-root"] if os.geteuid() == 0 else [])
+                cmd += ["-n", "1", FASTSLAM] + WORLD + ML + ["--out", out]
+                cmd += [":", "-n", "1", FASTSLAM] + rank1 + ML + ["--out", out + "1"]
+                r = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT)
+                self.assertNotEqual(r.returncode, 0, r.stdout)
+                self.assertIn("the ranks read different input", r.stderr)
+                self.assertIn(needle, r.stderr)
+                self.assertIn("the same source with the same options", r.stderr)
 
     def test_max_seconds_stops_every_rank_together(self):
         out = self.path("stopped")
