@@ -88,7 +88,9 @@ concept Combiner = std::invocable<F&, const T&, const T&> &&
 // Per-thread scratch that lives across kernel calls: `local()` returns the calling thread's
 // element, default-constructed (or copied from the exemplar) on the thread's first use.
 // Elements sit on distinct cache lines. Under TSan builds each call's threads are new, so there
-// may be one element per call and thread; code must not assume a bound on size().
+// may be one element per call and thread; code must not assume a bound on size(). TSan builds
+// take the elements from malloc, which TSan intercepts: memory TBB's allocator hands from one
+// filter's threads to another's would read to it as a race.
 template <class Scratch>
 class ThreadScratch {
  public:
@@ -109,9 +111,9 @@ class ThreadScratch {
   void clear() { elements_.clear(); }
 
  private:
-  tbb::enumerable_thread_specific<Scratch, tbb::cache_aligned_allocator<Scratch>,
-                                  tbb::ets_key_per_instance>
-      elements_;
+  using Allocator = std::conditional_t<FASTSLAM_PARALLEL_TSAN != 0, std::allocator<Scratch>,
+                                       tbb::cache_aligned_allocator<Scratch>>;
+  tbb::enumerable_thread_specific<Scratch, Allocator, tbb::ets_key_per_instance> elements_;
 };
 
 class ParticleKernel {
