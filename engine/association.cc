@@ -4,6 +4,8 @@
 #include <array>
 #include <cmath>
 
+#include "engine/internal/taken_slots.h"
+
 namespace fastslam::engine {
 namespace {
 
@@ -24,33 +26,20 @@ double maximum_likelihood(std::span<AssociationCandidate> candidates,
               return a.slot < b.slot;
             });
   double log_weight = 0.0;
-  std::size_t assigned = 0;
-  // The taken slots, in the order taken (the first kListed; beyond, `assignment` holds them all):
-  // scans are small, so a linear look is cheapest.
-  constexpr std::size_t kListed = 32;
-  std::array<memory::Slot, kListed> taken_slots;
-  const auto taken = [&](memory::Slot slot) {
-    if (assigned <= kListed) {
-      return std::find(taken_slots.begin(), taken_slots.begin() + assigned, slot) !=
-             taken_slots.begin() + assigned;
-    }
-    return std::find(assignment.begin(), assignment.end(), static_cast<std::int64_t>(slot)) !=
-           assignment.end();
-  };
-  for (std::size_t c = 0; c < candidates.size() && assigned < assignment.size(); ++c) {
+  internal::TakenSlots taken(assignment);
+  for (std::size_t c = 0; c < candidates.size() && taken.size() < assignment.size(); ++c) {
     const AssociationCandidate& cand = candidates[c];
     if (cand.log_likelihood < log_unassociated(cand.observation)) {
       if (same_for_all) break;  // sorted: every later one is below too
       continue;
     }
-    if (assignment[cand.observation] != kNewLandmark || taken(cand.slot)) continue;
+    if (assignment[cand.observation] != kNewLandmark || taken.contains(cand.slot)) continue;
     assignment[cand.observation] = cand.slot;
     log_weight += cand.log_likelihood;
-    if (assigned < kListed) taken_slots[assigned] = cand.slot;
-    ++assigned;
+    taken.take(cand.slot);
   }
   if (same_for_all) {
-    log_weight += static_cast<double>(assignment.size() - assigned) * log_unassociated(0);
+    log_weight += static_cast<double>(assignment.size() - taken.size()) * log_unassociated(0);
   } else {
     for (std::size_t j = 0; j < assignment.size(); ++j) {
       if (assignment[j] == kNewLandmark) log_weight += log_unassociated(j);

@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "engine/association.h"
+#include "engine/internal/taken_slots.h"
 
 namespace fastslam::engine::internal {
 
@@ -131,17 +132,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
   }
   std::fill(best.begin(), best.end(), -1);
   double log_weight = 0.0;
-  std::size_t assigned = 0;
-  constexpr std::size_t kListed = 32;  // the taken slots, as in association.cc
-  std::array<memory::Slot, kListed> taken_slots;
-  const auto taken = [&](memory::Slot slot) {
-    if (assigned <= kListed) {
-      return std::find(taken_slots.begin(), taken_slots.begin() + assigned, slot) !=
-             taken_slots.begin() + assigned;
-    }
-    return std::find(assignment.begin(), assignment.end(), static_cast<std::int64_t>(slot)) !=
-           assignment.end();
-  };
+  TakenSlots taken(assignment);
   // Observation j's best pair on a free landmark (exact), as an index into `grouped`, or -1.
   const auto resolve = [&](std::size_t j) -> std::int64_t {
     const std::uint32_t last = start[j + 1];
@@ -160,7 +151,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
       }
       if (top < 0) return -1;
       AssociationCandidate& c = grouped[static_cast<std::size_t>(top)];
-      if (taken(c.slot)) {
+      if (taken.contains(c.slot)) {
         c.observation |= kBlocked;
         continue;
       }
@@ -189,7 +180,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
   for (std::size_t p = 0; p < order.size();) {
     const std::uint32_t j = order[p];
     AssociationCandidate& cand = grouped[static_cast<std::size_t>(best[j])];
-    if (assigned > 0 && taken(cand.slot)) {
+    if (taken.size() > 0 && taken.contains(cand.slot)) {
       cand.observation |= kBlocked;
       best[j] = resolve(j);
       if (best[j] < 0) {
@@ -208,8 +199,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
     if (cand.log_likelihood < log_unassociated(j)) continue;  // j stays new
     assignment[j] = cand.slot;
     log_weight += cand.log_likelihood;
-    if (assigned < kListed) taken_slots[assigned] = cand.slot;
-    ++assigned;
+    taken.take(cand.slot);
   }
   // What the scan report and the map update read: the chosen pairs, and every candidate of the
   // observations left new, exact.
@@ -229,7 +219,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
     }
   }
   if (same_for_all) {
-    log_weight += static_cast<double>(z - assigned) * log_unassociated(0);
+    log_weight += static_cast<double>(z - taken.size()) * log_unassociated(0);
   } else {
     for (std::size_t j = 0; j < z; ++j) {
       if (assignment[j] == kNewLandmark) log_weight += log_unassociated(j);
