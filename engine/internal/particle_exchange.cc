@@ -77,7 +77,6 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
     const std::uint64_t released = retired.size();
     put(out, &released, sizeof released);
     put(out, retired.data(), retired.size() * sizeof(memory::NodeId));
-    counts.names_retired += released;
     const std::uint64_t sent = runs[d].size();
     put(out, &sent, sizeof sent);
     for (const Run& run : runs[d]) {
@@ -97,8 +96,6 @@ ExchangeCounts exchange_particles(FilterState& s, const parallel::ParticleKernel
       memory::TreeGraphWriter graph(out, links.registry, held);
       for (const Run& run : runs[d]) graph.write(store.map(run.particle).tree());
       held.insert(graph.named().begin(), graph.named().end());
-      counts.nodes_sent += graph.named().size();
-      counts.nodes_held += graph.nodes_written() - graph.named().size();
     }
     retired.clear();
     const std::string bytes = std::move(out).str();

@@ -34,9 +34,6 @@ struct ExchangeCounts {
   std::uint64_t bytes_sent = 0;
   // What sending every copy with its whole map would cost: copies x (pose + landmarks).
   std::uint64_t naive_bytes = 0;
-  std::uint64_t nodes_sent = 0;     // node records: nodes the receivers lacked
-  std::uint64_t nodes_held = 0;     // held records: subtrees the receivers hold, by name
-  std::uint64_t names_retired = 0;  // retired names told to other ranks
 };
 
 // REQUIRES: s.group; `ends` of s.store.size() entries and `start` from draw_ranges over the set.
