@@ -41,37 +41,37 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
     points_.push_back(
         {first_control + k, sums[1] / sums[0], sums[2] / sums[0], std::atan2(sums[4], sums[3])});
   };
-  if (group_ == nullptr) {
-    for (std::size_t k = 0; k < controls; ++k) {
-      record(k, kernel.reduce(
-                    m, Sums{},
-                    [&](std::size_t begin, std::size_t end) { return block_sums(k, begin, end); },
-                    add));
-    }
-    return;
-  }
-  // A rank of a shared set: every control's block sums in one gather (rank r's blocks, control
-  // by control), then each control folded over the set's blocks in order, as kernel.reduce.
+  // Every control's block sums in one parallel call (a call per control costs more than its
+  // work at small M), then each control folded over the blocks in order, as kernel.reduce folds
+  // its blocks: the same bits for any thread count. A rank of a shared set gathers every rank's
+  // blocks (rank r's blocks, control by control) and folds the set's blocks in order.
   constexpr std::size_t kBlock = parallel::ParticleKernel::kReduceBlock;
   const std::size_t blocks = (m + kBlock - 1) / kBlock;
   std::vector<Sums> mine(controls * blocks);
   kernel.for_each_fixed_block(m, kBlock, [&](std::size_t b, std::size_t begin, std::size_t end) {
     for (std::size_t k = 0; k < controls; ++k) mine[k * blocks + b] = block_sums(k, begin, end);
   });
-  std::vector<std::size_t> sizes;
-  const parallel::Bytes all = group_->all_gather(std::as_bytes(std::span(mine)), &sizes);
   std::vector<Sums> sums(controls, Sums{});
-  std::size_t at = 0;
-  for (const std::size_t bytes : sizes) {
-    const std::size_t rank_blocks = controls == 0 ? 0 : bytes / sizeof(Sums) / controls;
+  if (group_ == nullptr) {
     for (std::size_t k = 0; k < controls; ++k) {
-      for (std::size_t b = 0; b < rank_blocks; ++b) {
-        Sums block;
-        std::memcpy(&block, all.data() + at + (k * rank_blocks + b) * sizeof(Sums), sizeof(Sums));
-        sums[k] = add(sums[k], block);
-      }
+      for (std::size_t b = 0; b < blocks; ++b) sums[k] = add(sums[k], mine[k * blocks + b]);
     }
-    at += bytes;
+  } else {
+    std::vector<std::size_t> sizes;
+    const parallel::Bytes all = group_->all_gather(std::as_bytes(std::span(mine)), &sizes);
+    std::size_t at = 0;
+    for (const std::size_t bytes : sizes) {
+      const std::size_t rank_blocks = controls == 0 ? 0 : bytes / sizeof(Sums) / controls;
+      for (std::size_t k = 0; k < controls; ++k) {
+        for (std::size_t b = 0; b < rank_blocks; ++b) {
+          Sums block;
+          std::memcpy(&block, all.data() + at + (k * rank_blocks + b) * sizeof(Sums),
+                      sizeof(Sums));
+          sums[k] = add(sums[k], block);
+        }
+      }
+      at += bytes;
+    }
   }
   for (std::size_t k = 0; k < controls; ++k) record(k, sums[k]);
 }

@@ -48,33 +48,40 @@ int digits_backwards(char* end, std::uint64_t v) {
 
 __extension__ typedef unsigned __int128 Uint128;  // GCC's and Clang's, outside ISO C++
 
-// "%.*f" of a finite `v` with |v| < 2^53 and precision <= 9, exactly as printf: v = m 2^e with
-// an integer m < 2^53, so v 10^p = m 10^p 2^e, where m 10^p < 2^83 fits 128 bits; the shift by
-// -e rounds half to even on the exact remainder, as printf rounds the exact binary value.
-// Returns the end of the text.
+constexpr double kScales[] = {1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9};  // exact
+
+// |v| 10^p rounded half to even, v = m 2^e with an integer m < 2^53 and e <= 0 (|v| < 2^53):
+// v 10^p = m 10^p 2^e, where m 10^p < 2^83 fits 128 bits, and the shift by -e rounds on the
+// exact remainder, as printf rounds the exact binary value.
+Uint128 exact_scaled(std::uint64_t m, int e, int precision) {
+  const Uint128 n = static_cast<Uint128>(m) * kPowersOfTen[precision];
+  const int s = -e;
+  if (s == 0) return n;
+  if (s >= 128) return 0;  // below 2^83 / 2^128: rounds to zero
+  const Uint128 q = n >> s;
+  const Uint128 rem = n - (q << s);
+  const Uint128 half = static_cast<Uint128>(1) << (s - 1);
+  return q + ((rem > half || (rem == half && (q & 1) != 0)) ? 1 : 0);
+}
+
+// "%.*f" of a finite `v` with |v| < 2^53 and precision <= 9, exactly as printf. Returns the end
+// of the text.
 char* fixed_exact(char* out, double v, int precision) {
   const std::uint64_t bits = std::bit_cast<std::uint64_t>(v);
   const bool negative = (bits >> 63) != 0;
-  const int biased = static_cast<int>((bits >> 52) & 0x7ff);
-  std::uint64_t m = bits & ((std::uint64_t{1} << 52) - 1);
-  int e;
-  if (biased == 0) {
-    e = -1074;  // subnormal (or zero)
+  // Fast path: y = fl(|v| 10^p) lies within half an ulp (<= y 2^-53) of the exact product, so
+  // when y is further than an ulp from the nearest tie, the exact product rounds to y's nearest
+  // integer. Ties and near-ties take the exact path.
+  const double y = std::fabs(v) * kScales[precision];
+  const double nearest = std::nearbyint(y);
+  Uint128 n;
+  if (y < 0x1p52 && 0.5 - std::fabs(y - nearest) > y * 0x1p-51) {
+    n = static_cast<std::uint64_t>(nearest);
   } else {
-    m |= std::uint64_t{1} << 52;
-    e = biased - 1075;
-  }
-  Uint128 n = static_cast<Uint128>(m) * kPowersOfTen[precision];
-  if (e < 0) {  // |v| < 2^53 keeps e <= 0
-    const int s = -e;
-    if (s >= 128) {
-      n = 0;  // below 2^83 / 2^128: rounds to zero
-    } else {
-      const Uint128 q = n >> s;
-      const Uint128 rem = n - (q << s);
-      const Uint128 half = static_cast<Uint128>(1) << (s - 1);
-      n = q + ((rem > half || (rem == half && (q & 1) != 0)) ? 1 : 0);
-    }
+    const int biased = static_cast<int>((bits >> 52) & 0x7ff);
+    const std::uint64_t fraction = bits & ((std::uint64_t{1} << 52) - 1);
+    n = biased == 0 ? exact_scaled(fraction, -1074, precision)  // subnormal (or zero)
+                    : exact_scaled(fraction | (std::uint64_t{1} << 52), biased - 1075, precision);
   }
   // n < 2^83 < 10^25: at most 25 digits; below 2^64 (|v| < 1.8e13 at 6 decimals) one word.
   char buf[48];

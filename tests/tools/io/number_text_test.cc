@@ -46,7 +46,7 @@ TEST(TextLine, FixedAndGeneralAreTheBytesOfPrintf) {
   }
   TextLine line;
   for (const double v : values) {
-    for (const int precision : {0, 1, 3, 6, 9, 17}) {
+    for (const int precision : {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 17}) {
       line.clear();
       line.fixed(v, precision);
       ASSERT_EQ(line.view(), printf_of("%.*f", precision, v)) << "precision " << precision;

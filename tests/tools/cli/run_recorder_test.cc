@@ -1,0 +1,125 @@
+#include "tools/cli/run_recorder.h"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace fastslam::tools {
+namespace {
+
+namespace fs = std::filesystem;
+
+class RunRecorderTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("run_recorder_test-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // Feeds `n` controls and truth poses, and the estimates in batches of 7 (as a filter hands
+  // them over between scans); poses wind along a curve with values of every sign.
+  static void feed(RunRecorder& recorder, int n) {
+    std::vector<engine::TrajectoryPoint> batch;
+    for (int k = 0; k < n; ++k) {
+      Event control;
+      control.kind = EventKind::kControl;
+      control.time = 0.025 * (k + 1);
+      control.dt = 0.025;
+      control.control = {3.0, 0.01 * std::sin(0.01 * k)};
+      recorder.control(control);
+      Event truth;
+      truth.kind = EventKind::kTruthPose;
+      truth.time = control.time;
+      truth.x = 40.0 * std::cos(0.003 * k) - 20.0;
+      truth.y = -15.0 * std::sin(0.007 * k);
+      truth.theta = std::remainder(0.003 * k, 2 * M_PI);
+      recorder.truth(truth);
+      batch.push_back({static_cast<std::uint64_t>(k), truth.x + 0.1, truth.y - 0.2,
+                       truth.theta + 1e-3});
+      if (batch.size() == 7 || k + 1 == n) {
+        recorder.estimates(batch);
+        batch.clear();
+      }
+    }
+  }
+
+  static std::vector<std::string> lines(const fs::path& file) {
+    std::ifstream in(file);
+    std::vector<std::string> out;
+    for (std::string line; std::getline(in, line);) out.push_back(line);
+    return out;
+  }
+
+  static std::string printf_pose(double t, double x, double y, double theta) {
+    char buf[160];
+    std::snprintf(buf, sizeof(buf), "%.3f,%.6f,%.6f,%.6f", t, x, y, theta);
+    return buf;
+  }
+
+  fs::path dir_;
+};
+
+// Many batches of the background writer (thousands of poses a file): every line is printf's,
+// in order, and every file is in place after finish().
+TEST_F(RunRecorderTest, WritesEveryPoseInOrderAsPrintfWould) {
+  constexpr int kPoses = 9001;
+  RecordedRun run;
+  {
+    RunRecorder recorder(LogHeader{}, engine::SensorOffset{}, dir_.string(), 10.0);
+    feed(recorder, kPoses);
+    run = recorder.finish();
+  }
+  EXPECT_TRUE(run.errors.empty());
+  EXPECT_EQ(run.files, (std::vector<std::string>{"trajectory.csv", "trajectory.tum", "truth.csv",
+                                                  "dead_reckoning.csv"}));
+  const std::vector<std::string> trajectory = lines(dir_ / "trajectory.csv");
+  const std::vector<std::string> truth = lines(dir_ / "truth.csv");
+  ASSERT_EQ(trajectory.size(), kPoses + 1u);
+  ASSERT_EQ(truth.size(), kPoses + 1u);
+  EXPECT_EQ(trajectory[0], "t,x,y,theta");
+  EXPECT_EQ(lines(dir_ / "trajectory.tum").size(), kPoses + 1u);
+  EXPECT_EQ(lines(dir_ / "dead_reckoning.csv").size(), kPoses + 1u);
+  for (int k = 0; k < kPoses; ++k) {
+    const double t = 0.025 * (k + 1);
+    const double x = 40.0 * std::cos(0.003 * k) - 20.0, y = -15.0 * std::sin(0.007 * k);
+    const double theta = std::remainder(0.003 * k, 2 * M_PI);
+    ASSERT_EQ(truth[k + 1], printf_pose(t, x, y, theta)) << "pose " << k;
+    ASSERT_EQ(trajectory[k + 1], printf_pose(t, x + 0.1, y - 0.2, theta + 1e-3)) << "pose " << k;
+  }
+  for (const auto& entry : fs::directory_iterator(dir_)) {
+    EXPECT_NE(entry.path().filename().string()[0], '.') << "a temporary is left";
+  }
+}
+
+// A recorder dropped without finish() (a run that threw) writes what it queued and then
+// leaves no file and no temporary behind.
+TEST_F(RunRecorderTest, DroppedWithoutFinishLeavesNothing) {
+  {
+    RunRecorder recorder(LogHeader{}, engine::SensorOffset{}, dir_.string(), 10.0);
+    feed(recorder, 7001);
+  }
+  EXPECT_TRUE(fs::is_empty(dir_));
+}
+
+// Without an output directory nothing is written and the scores still come.
+TEST_F(RunRecorderTest, WithoutAnOutputDirectoryScoresOnly) {
+  RunRecorder recorder(LogHeader{}, engine::SensorOffset{}, "", 10.0);
+  feed(recorder, 500);
+  const RecordedRun run = recorder.finish();
+  EXPECT_TRUE(run.files.empty());
+  ASSERT_TRUE(run.filter.truth.has_value());
+  EXPECT_TRUE(fs::is_empty(dir_));
+}
+
+}  // namespace
+}  // namespace fastslam::tools
