@@ -1,87 +1,22 @@
 #include "tools/cli/run_recorder.h"
 
-#include <atomic>
 #include <cmath>
-#include <condition_variable>
 #include <cstdio>
-#include <functional>
-#include <mutex>
-#include <optional>
 #include <stdexcept>
 #include <string_view>
-#include <system_error>
-#include <thread>
 #include <utility>
-#include <vector>
 
 #include "tools/io/number_text.h"
 
 namespace fastslam::tools {
 
-// Formats and writes batches of poses on one background thread, so that the thread running the
-// filter pays a copy per pose for the path files, not the number formatting and the writes.
-// Batches run in the order given; a PoseFile waits for its own batches before it commits.
-class RunRecorder::Writer {
- public:
-  Writer() : thread_([this] { serve(); }) {}
-  // Writes what is queued, then stops.
-  ~Writer() {
-    {
-      const std::lock_guard lock(mutex_);
-      stopping_ = true;
-    }
-    wake_.notify_all();
-  }
-
-  void submit(std::function<void()> batch) {
-    {
-      const std::lock_guard lock(mutex_);
-      queue_.push_back(std::move(batch));
-    }
-    wake_.notify_all();
-  }
-
-  // Waits until every batch submitted so far is written.
-  void drain() {
-    std::unique_lock lock(mutex_);
-    const std::uint64_t target = submitted_ + queue_.size();
-    done_.wait(lock, [&] { return written_ >= target; });
-  }
-
- private:
-  void serve() {
-    std::unique_lock lock(mutex_);
-    for (;;) {
-      wake_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
-      if (queue_.empty()) return;  // stopping, and nothing left
-      std::function<void()> batch = std::move(queue_.front());
-      queue_.pop_front();
-      ++submitted_;
-      lock.unlock();
-      batch();  // never throws: a PoseFile keeps its own error
-      lock.lock();
-      ++written_;
-      done_.notify_all();
-    }
-  }
-
-  std::mutex mutex_;
-  std::condition_variable wake_, done_;
-  std::deque<std::function<void()>> queue_;
-  std::uint64_t submitted_ = 0;  // batches taken off the queue
-  std::uint64_t written_ = 0;    // batches finished
-  bool stopping_ = false;
-  std::jthread thread_;  // last: it starts after, and is joined before, the members it uses
-};
-
-// One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, formatted and
-// written to its temporary by the writer in batches, and put in place by close().
+// One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, written to its
+// temporary as it comes and put in place by close().
 class RunRecorder::PoseFile {
  public:
   enum class Format { kCsv, kCsvPosition, kTum };
 
-  PoseFile(const std::string& path, Format format, Writer& writer)
-      : format_(format), file_(path), writer_(writer) {
+  PoseFile(const std::string& path, Format format) : format_(format), file_(path) {
     switch (format_) {
       case Format::kCsv:
         file_.write("t,x,y,theta\n");
@@ -93,65 +28,29 @@ class RunRecorder::PoseFile {
         file_.write(kTumHeader);
         break;
     }
-    pending_.reserve(kBatch);
   }
 
-  // Throws std::runtime_error naming the file once a write has failed (learnt a batch later
-  // than the write).
+  // Throws std::runtime_error naming the file once a write has failed.
   void add(const StampedPose& p) {
-    if (failed_.load(std::memory_order_acquire)) throw std::runtime_error(error_);
-    pending_.push_back(p);
-    if (pending_.size() == kBatch) submit();
-  }
-
-  // Writes what is pending and puts the file in place. Throws as add() or AtomicFile::commit.
-  void close() {
-    submit();
-    writer_.drain();
-    if (failed_.load(std::memory_order_acquire)) throw std::runtime_error(error_);
-    file_.commit();
-  }
-
- private:
-  static constexpr std::size_t kBatch = 2048;
-
-  void submit() {
-    if (pending_.empty()) return;
-    writer_.submit([this, batch = std::move(pending_)] { write(batch); });
-    pending_ = {};
-    pending_.reserve(kBatch);
-  }
-
-  // On the writer's thread.
-  void write(const std::vector<StampedPose>& batch) {
-    if (failed_.load(std::memory_order_relaxed)) return;
-    try {
-      for (const StampedPose& p : batch) {
-        if (format_ == Format::kTum) {
-          line_.clear();
-          append_tum(line_, p);
-          file_.write(line_);
-        } else {
-          text_.clear();
-          text_.fixed(p.time, 3).put(',').fixed(p.x, 6).put(',').fixed(p.y, 6);
-          if (format_ == Format::kCsv) text_.put(',').fixed(p.theta, 6);
-          file_.write(text_.put('\n').view());
-        }
-      }
-    } catch (const std::exception& e) {
-      error_ = e.what();
-      failed_.store(true, std::memory_order_release);
+    if (format_ == Format::kTum) {
+      line_.clear();
+      append_tum(line_, p);
+      file_.write(line_);
+    } else {
+      text_.clear();
+      text_.fixed(p.time, 3).put(',').fixed(p.x, 6).put(',').fixed(p.y, 6);
+      if (format_ == Format::kCsv) text_.put(',').fixed(p.theta, 6);
+      file_.write(text_.put('\n').view());
     }
   }
 
+  void close() { file_.commit(); }
+
+ private:
   Format format_;
-  AtomicFile file_;  // written on the writer's thread, committed after a drain
-  Writer& writer_;
-  std::vector<StampedPose> pending_;
+  AtomicFile file_;
   std::string line_;
   TextLine text_;
-  std::string error_;  // set before failed_
-  std::atomic<bool> failed_{false};
 };
 
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
@@ -165,9 +64,8 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
       dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}, "dead reckoning's GPS error") {
   if (!out_dir_.empty()) {
     using F = PoseFile::Format;
-    writer_ = std::make_unique<Writer>();
-    trajectory_csv_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv, *writer_);
-    trajectory_tum_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.tum", F::kTum, *writer_);
+    trajectory_csv_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv);
+    trajectory_tum_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.tum", F::kTum);
   }
   // The start pose is scored (it is the estimate before the first control) but not written:
   // the files hold the poses after the controls.
@@ -180,9 +78,7 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
   }
 }
 
-RunRecorder::~RunRecorder() {
-  writer_.reset();  // writes what is queued while the files are still there
-}
+RunRecorder::~RunRecorder() = default;
 
 void RunRecorder::Scored::estimate(const StampedPose& p) {
   if (error) return;
@@ -205,9 +101,9 @@ void RunRecorder::Scored::reference(const StampedPose& p) {
 RunRecorder::PoseFile& RunRecorder::file(std::unique_ptr<PoseFile>& slot, const char* name,
                                          bool position_only) {
   if (!slot) {
-    slot = std::make_unique<PoseFile>(
-        out_dir_ + "/" + name,
-        position_only ? PoseFile::Format::kCsvPosition : PoseFile::Format::kCsv, *writer_);
+    slot = std::make_unique<PoseFile>(out_dir_ + "/" + name, position_only
+                                                                 ? PoseFile::Format::kCsvPosition
+                                                                 : PoseFile::Format::kCsv);
   }
   return *slot;
 }
@@ -260,47 +156,22 @@ void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
 
 RecordedRun RunRecorder::finish() {
   RecordedRun r;
-  // Each file on its own: one that failed leaves the others whole. The files are closed
-  // concurrently, so that their fsyncs share the file system's journal commits; the names and
-  // errors are reported in a fixed order.
-  struct Closing {
-    std::unique_ptr<PoseFile>* file;
-    const char* name;
-    std::optional<std::string> error;
-  };
-  std::vector<Closing> closing;
-  for (auto [f, name] : {std::pair{&trajectory_csv_, "trajectory.csv"},
-                         std::pair{&trajectory_tum_, "trajectory.tum"},
-                         std::pair{&truth_csv_, "truth.csv"}, std::pair{&gps_csv_, "gps.csv"},
-                         std::pair{&dr_csv_, "dead_reckoning.csv"}}) {
-    if (*f) closing.push_back({f, name, std::nullopt});
-  }
-  auto close = [](Closing& c) {
+  // Each file on its own: one that failed leaves the others whole.
+  auto close = [&](std::unique_ptr<PoseFile>& f, const char* name) {
+    if (!f) return;
     try {
-      (*c.file)->close();
+      f->close();
+      r.files.emplace_back(name);
     } catch (const std::exception& e) {
-      c.error = e.what();
+      r.errors.emplace_back(e.what());
     }
-    c.file->reset();
+    f.reset();
   };
-  {
-    std::vector<std::jthread> threads;
-    for (std::size_t i = 1; i < closing.size(); ++i) {
-      try {
-        threads.emplace_back(close, std::ref(closing[i]));
-      } catch (const std::system_error&) {  // no thread to be had: close it here
-        close(closing[i]);
-      }
-    }
-    if (!closing.empty()) close(closing[0]);
-  }
-  for (const Closing& c : closing) {
-    if (c.error) {
-      r.errors.push_back(*c.error);
-    } else {
-      r.files.emplace_back(c.name);
-    }
-  }
+  close(trajectory_csv_, "trajectory.csv");
+  close(trajectory_tum_, "trajectory.tum");
+  close(truth_csv_, "truth.csv");
+  close(gps_csv_, "gps.csv");
+  close(dr_csv_, "dead_reckoning.csv");
   auto score = [&](Scored& s, std::optional<TrajectoryMetrics>& into) {
     if (s.error) {
       r.warnings.push_back(std::string(s.name) + " not computed: " + *s.error);

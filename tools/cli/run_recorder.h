@@ -6,12 +6,9 @@
 // streaming trajectory evaluation (tools/eval/trajectory_metrics.h) against the truth and
 // against GPS.
 //
-// With an output directory, one background thread formats and writes the files in batches of
-// poses, so the caller's thread pays a copy per pose.
-//
-// Ownership: owns its files, their writer thread and the evaluators. Thread safety:
-// thread-compatible. Costs: O(1) per control, truth pose or fix; memory O(controls between two
-// estimate batches) plus the batches queued to the writer.
+// Ownership: owns its files and evaluators. Thread safety: thread-compatible.
+// Costs: O(1) per control, truth pose or fix plus a buffered file write; memory O(controls
+// between two estimate batches).
 #pragma once
 
 #include <cstdint>
@@ -70,7 +67,6 @@ class RunRecorder {
   RecordedRun finish();
 
  private:
-  class Writer;
   class PoseFile;
 
   PoseFile& file(std::unique_ptr<PoseFile>& slot, const char* name, bool position_only);
@@ -92,9 +88,6 @@ class RunRecorder {
   Scored filter_truth_, filter_gps_, dr_truth_, dr_gps_;
   std::deque<double> control_times_;  // of controls not yet in an estimate batch
   std::uint64_t first_pending_control_ = 0;
-  // The thread that formats and writes the path files (only with an output directory); the
-  // destructor stops it, its queue written, before the files go.
-  std::unique_ptr<Writer> writer_;
   std::unique_ptr<PoseFile> trajectory_csv_, trajectory_tum_, truth_csv_, gps_csv_, dr_csv_;
   std::optional<StampedPose> last_truth_;
   std::uint64_t truth_poses_ = 0, gps_fixes_ = 0;

@@ -69,8 +69,8 @@ class RunRecorderTest : public ::testing::Test {
   fs::path dir_;
 };
 
-// Many batches of the background writer (thousands of poses a file): every line is printf's,
-// in order, and every file is in place after finish().
+// Thousands of poses a file (several write buffers): every line is printf's, in order, and
+// every file is in place after finish().
 TEST_F(RunRecorderTest, WritesEveryPoseInOrderAsPrintfWould) {
   constexpr int kPoses = 9001;
   RecordedRun run;
@@ -101,8 +101,8 @@ TEST_F(RunRecorderTest, WritesEveryPoseInOrderAsPrintfWould) {
   }
 }
 
-// A recorder dropped without finish() (a run that threw) writes what it queued and then
-// leaves no file and no temporary behind.
+// A recorder dropped without finish() (a run that threw) leaves no file and no temporary
+// behind.
 TEST_F(RunRecorderTest, DroppedWithoutFinishLeavesNothing) {
   {
     RunRecorder recorder(LogHeader{}, engine::SensorOffset{}, dir_.string(), 10.0);
