@@ -24,15 +24,24 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
                                 std::uint64_t first_control) {
   using Sums = std::array<double, 5>;
   const std::size_t m = weights_.size();
-  auto block_sums = [&](std::size_t k, std::size_t begin, std::size_t end) {
-    const double* rec = &recorded_[k * m * 4];
-    Sums part{};
+  constexpr std::size_t kBlock = parallel::ParticleKernel::kReduceBlock;
+  const std::size_t blocks = (m + kBlock - 1) / kBlock;
+  std::vector<Sums> mine(controls * blocks);
+  // Controls [k0, k0 + G) of block b: each control's sums in particle order, as one control's
+  // loop would add them, with G controls' additions interleaved so that they overlap.
+  auto group_sums = [&]<std::size_t G>(std::size_t k0, std::size_t b, std::size_t begin,
+                                       std::size_t end, double weight_sum) {
+    std::array<std::array<double, 4>, G> part{};
     for (std::size_t i = begin; i < end; ++i) {
       const double w = weights_[i];
-      part[0] += w;
-      for (int c = 0; c < 4; ++c) part[c + 1] += w * rec[i * 4 + c];
+      for (std::size_t g = 0; g < G; ++g) {
+        const double* rec = &recorded_[((k0 + g) * m + i) * 4];
+        for (int c = 0; c < 4; ++c) part[g][c] += w * rec[c];
+      }
     }
-    return part;
+    for (std::size_t g = 0; g < G; ++g) {
+      mine[(k0 + g) * blocks + b] = {weight_sum, part[g][0], part[g][1], part[g][2], part[g][3]};
+    }
   };
   auto add = [](const Sums& a, const Sums& b) {
     return Sums{a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3], a[4] + b[4]};
@@ -45,11 +54,12 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
   // work at small M), then each control folded over the blocks in order, as kernel.reduce folds
   // its blocks: the same bits for any thread count. A rank of a shared set gathers every rank's
   // blocks (rank r's blocks, control by control) and folds the set's blocks in order.
-  constexpr std::size_t kBlock = parallel::ParticleKernel::kReduceBlock;
-  const std::size_t blocks = (m + kBlock - 1) / kBlock;
-  std::vector<Sums> mine(controls * blocks);
   kernel.for_each_fixed_block(m, kBlock, [&](std::size_t b, std::size_t begin, std::size_t end) {
-    for (std::size_t k = 0; k < controls; ++k) mine[k * blocks + b] = block_sums(k, begin, end);
+    double weight_sum = 0.0;  // the same for every control
+    for (std::size_t i = begin; i < end; ++i) weight_sum += weights_[i];
+    std::size_t k = 0;
+    for (; k + 4 <= controls; k += 4) group_sums.template operator()<4>(k, b, begin, end, weight_sum);
+    for (; k < controls; ++k) group_sums.template operator()<1>(k, b, begin, end, weight_sum);
   });
   std::vector<Sums> sums(controls, Sums{});
   if (group_ == nullptr) {
