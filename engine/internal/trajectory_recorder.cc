@@ -58,7 +58,8 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
     double weight_sum = 0.0;  // the same for every control
     for (std::size_t i = begin; i < end; ++i) weight_sum += weights_[i];
     std::size_t k = 0;
-    for (; k + 4 <= controls; k += 4) group_sums.template operator()<4>(k, b, begin, end, weight_sum);
+    for (; k + 4 <= controls; k += 4)
+      group_sums.template operator()<4>(k, b, begin, end, weight_sum);
     for (; k < controls; ++k) group_sums.template operator()<1>(k, b, begin, end, weight_sum);
   });
   std::vector<Sums> sums(controls, Sums{});
@@ -75,8 +76,7 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
       for (std::size_t k = 0; k < controls; ++k) {
         for (std::size_t b = 0; b < rank_blocks; ++b) {
           Sums block;
-          std::memcpy(&block, all.data() + at + (k * rank_blocks + b) * sizeof(Sums),
-                      sizeof(Sums));
+          std::memcpy(&block, all.data() + at + (k * rank_blocks + b) * sizeof(Sums), sizeof(Sums));
           sums[k] = add(sums[k], block);
         }
       }

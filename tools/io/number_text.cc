@@ -16,9 +16,8 @@ int clamp(int precision) {
   return precision < 0 ? 0 : precision > kMaxPrecision ? kMaxPrecision : precision;
 }
 
-constexpr std::uint64_t kPowersOfTen[] = {1,         10,         100,         1000,      10000,
-                                          100000,    1000000,    10000000,    100000000,
-                                          1000000000};
+constexpr std::uint64_t kPowersOfTen[] = {1,      10,      100,      1000,      10000,
+                                          100000, 1000000, 10000000, 100000000, 1000000000};
 constexpr int kFastPrecision = 9;
 
 // "00" to "99": two digits per division halves the chain of dependent divisions.

@@ -44,8 +44,8 @@ class RunRecorderTest : public ::testing::Test {
       truth.y = -15.0 * std::sin(0.007 * k);
       truth.theta = std::remainder(0.003 * k, 2 * M_PI);
       recorder.truth(truth);
-      batch.push_back({static_cast<std::uint64_t>(k), truth.x + 0.1, truth.y - 0.2,
-                       truth.theta + 1e-3});
+      batch.push_back(
+          {static_cast<std::uint64_t>(k), truth.x + 0.1, truth.y - 0.2, truth.theta + 1e-3});
       if (batch.size() == 7 || k + 1 == n) {
         recorder.estimates(batch);
         batch.clear();
@@ -81,7 +81,7 @@ TEST_F(RunRecorderTest, WritesEveryPoseInOrderAsPrintfWould) {
   }
   EXPECT_TRUE(run.errors.empty());
   EXPECT_EQ(run.files, (std::vector<std::string>{"trajectory.csv", "trajectory.tum", "truth.csv",
-                                                  "dead_reckoning.csv"}));
+                                                 "dead_reckoning.csv"}));
   const std::vector<std::string> trajectory = lines(dir_ / "trajectory.csv");
   const std::vector<std::string> truth = lines(dir_ / "truth.csv");
   ASSERT_EQ(trajectory.size(), kPoses + 1u);
