@@ -1,7 +1,10 @@
 // The trajectory recorder against a direct weighted mean (long double sums), and its
-// independence of the kernel's thread count (the reduction's blocks are fixed).
+// independence of the kernel's thread count (the reduction's blocks are fixed) and of the
+// controls beside a control in a pass.
 #include "engine/internal/trajectory_recorder.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -61,6 +64,31 @@ TEST(TrajectoryRecorderTest, WeightedMeanPerControl) {
     EXPECT_NEAR(got.theta, std::atan2(static_cast<double>(s), static_cast<double>(c)), 1e-12);
     EXPECT_EQ(got.x, two[k + 1].x);
     EXPECT_EQ(got.theta, two[k + 1].theta);
+  }
+}
+
+// A control's point does not depend on the controls beside it in the pass (the sums of a
+// block's controls are interleaved, each in particle order) nor on the thread count: a pass of
+// K controls gives the bits of K passes of one, for block edges on both sides of the count.
+TEST(TrajectoryRecorderTest, AControlsPointIsTheSameWhateverThePassHolds) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (const std::size_t m : {1u, 255u, 256u, 257u, 1000u}) {
+    constexpr std::size_t kControls = 9;  // two groups of four and one alone
+    std::vector<double> log_weight(m), poses(kControls * m * 3);
+    for (double& l : log_weight) l = 20 * u(rng);
+    for (double& p : poses) p = 50 * u(rng);
+    for (const unsigned threads : {1u, 2u}) {
+      const std::vector<TrajectoryPoint> all = record(threads, log_weight, poses, kControls);
+      ASSERT_EQ(all.size(), kControls + 1);
+      for (std::size_t k = 0; k < kControls; ++k) {
+        const std::vector<double> alone(poses.begin() + k * m * 3, poses.begin() + (k + 1) * m * 3);
+        const TrajectoryPoint one = record(1, log_weight, alone, 1)[1];
+        EXPECT_EQ(all[k + 1].x, one.x) << "m " << m << " threads " << threads << " k " << k;
+        EXPECT_EQ(all[k + 1].y, one.y);
+        EXPECT_EQ(all[k + 1].theta, one.theta);
+      }
+    }
   }
 }
 
