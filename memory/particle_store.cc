@@ -1,6 +1,9 @@
 #include "memory/particle_store.h"
 
 #include <algorithm>
+#include <cstddef>
+#include <memory>
+#include <new>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -94,54 +97,81 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
   const bool carried = options_.pose_covariance == PoseCovariance::kCarried;
   if (carried) pose_cov_spare_.resize(m * kPoseCovStride);
   double* const ncov = pose_cov_spare_.data();
-  // The survivors' maps, in blocks: one allocation per gather as large as all the maps would
-  // be handed back to the system by the allocator and fault in fresh pages every time.
+  // The survivors' maps, made in the first parallel loop and moved out in the second, in raw
+  // blocks: one allocation per gather as large as all the maps would be handed back to the
+  // system by the allocator and fault in fresh pages every time; making (or even marking) every
+  // slot here, one by one, was a sequential part of each resampling. `made` says which exist,
+  // so that an exception from the thread pool leaks none.
   constexpr std::size_t kMapBlock = 8192;
-  std::vector<std::vector<ParticleMap>> survivors((m + kMapBlock - 1) / kMapBlock);
-  for (std::size_t b = 0; b < survivors.size(); ++b) {
-    survivors[b].assign(std::min(kMapBlock, m - b * kMapBlock), empty_map());
+  struct alignas(ParticleMap) MapSlot {
+    std::byte bytes[sizeof(ParticleMap)];
+  };
+  std::vector<std::unique_ptr<MapSlot[]>> survivors((m + kMapBlock - 1) / kMapBlock);
+  for (std::unique_ptr<MapSlot[]>& block : survivors) {
+    block = std::make_unique_for_overwrite<MapSlot[]>(kMapBlock);
   }
+  std::vector<unsigned char> made(m, 0);
+  auto slot = [&](std::size_t k) { return survivors[k / kMapBlock][k % kMapBlock].bytes; };
+  auto survivor = [&](std::size_t k) {
+    return std::launder(reinterpret_cast<ParticleMap*>(slot(k)));
+  };
+  auto unmake = [&] {
+    for (std::size_t k = 0; k < m; ++k) {
+      if (made[k] != 0) survivor(k)->~ParticleMap();
+    }
+  };
   if (grain == 0) grain = 1;
-  for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t k = begin; k != end; ++k) {
-      const std::uint32_t i = index[k];
-      nx[k] = x_[i];
-      ny[k] = y_[i];
-      ntheta[k] = theta_[i];
-      nv[k] = v_[i];
-      nomega[k] = omega_[i];
-      nlog_weight[k] = log_weight_[i];
-      if (carried) {
-        std::copy_n(&pose_cov_[std::size_t{i} * kPoseCovStride], kPoseCovStride,
-                    &ncov[k * kPoseCovStride]);
+  // What may throw comes before the first survivor is made (so no reallocation below).
+  if (options_.pose_covariance == PoseCovariance::kScratch) pose_cov_.reserve(m * kPoseCovStride);
+  maps_.reserve(m);
+  try {
+    for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k != end; ++k) {
+        const std::uint32_t i = index[k];
+        nx[k] = x_[i];
+        ny[k] = y_[i];
+        ntheta[k] = theta_[i];
+        nv[k] = v_[i];
+        nomega[k] = omega_[i];
+        nlog_weight[k] = log_weight_[i];
+        if (carried) {
+          std::copy_n(&pose_cov_[std::size_t{i} * kPoseCovStride], kPoseCovStride,
+                      &ncov[k * kPoseCovStride]);
+        }
+        ::new (slot(k)) ParticleMap(maps_[i]);  // bumps the roots' counts
+        made[k] = 1;
       }
-      survivors[k / kMapBlock][k % kMapBlock] = maps_[i];  // bumps the roots' counts
-    }
-  });
-  x_.swap(nx);
-  y_.swap(ny);
-  theta_.swap(ntheta);
-  v_.swap(nv);
-  omega_.swap(nomega);
-  log_weight_.swap(nlog_weight);
-  if (carried) {
-    pose_cov_.swap(pose_cov_spare_);
-  } else if (options_.pose_covariance == PoseCovariance::kScratch) {
-    pose_cov_.resize(m * kPoseCovStride, 0.0);
-  }
-  // The old maps each drop one reference as the survivors replace them (trees no survivor
-  // shares are freed there), in parallel; maps beyond the new count are released first.
-  if (m < from_size) {
-    for_blocks(from_size - m, grain, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t k = begin; k != end; ++k) maps_[m + k].clear();
     });
-  }
-  maps_.resize(m, empty_map());
-  for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t k = begin; k != end; ++k) {
-      maps_[k] = std::move(survivors[k / kMapBlock][k % kMapBlock]);
+    x_.swap(nx);
+    y_.swap(ny);
+    theta_.swap(ntheta);
+    v_.swap(nv);
+    omega_.swap(nomega);
+    log_weight_.swap(nlog_weight);
+    if (carried) {
+      pose_cov_.swap(pose_cov_spare_);
+    } else if (options_.pose_covariance == PoseCovariance::kScratch) {
+      pose_cov_.resize(m * kPoseCovStride, 0.0);
     }
-  });
+    // The old maps each drop one reference as the survivors replace them (trees no survivor
+    // shares are freed there), in parallel; maps beyond the new count are released first.
+    if (m < from_size) {
+      for_blocks(from_size - m, grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t k = begin; k != end; ++k) maps_[m + k].clear();
+      });
+    }
+    maps_.resize(m, empty_map());
+    for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k != end; ++k) {
+        maps_[k] = std::move(*survivor(k));
+        survivor(k)->~ParticleMap();
+        made[k] = 0;
+      }
+    });
+  } catch (...) {  // only the thread pool's own failures: the loops' bodies do not throw
+    unmake();
+    throw;
+  }
 }
 
 }  // namespace fastslam::memory

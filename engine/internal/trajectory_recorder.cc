@@ -14,10 +14,10 @@ void TrajectoryRecorder::begin(std::span<const double> log_weight, std::size_t c
   if (group_ != nullptr) {
     for (const double m : parallel::all_gather_value(*group_, max_lw)) max_lw = std::max(max_lw, m);
   }
+  // The shifted log-weights now (the pass changes the weights); finish() exponentiates them in
+  // its parallel blocks.
   weights_.resize(log_weight.size());
-  for (std::size_t i = 0; i < log_weight.size(); ++i) {
-    weights_[i] = std::exp(log_weight[i] - max_lw);
-  }
+  for (std::size_t i = 0; i < log_weight.size(); ++i) weights_[i] = log_weight[i] - max_lw;
 }
 
 void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::size_t controls,
@@ -56,7 +56,10 @@ void TrajectoryRecorder::finish(const parallel::ParticleKernel& kernel, std::siz
   // blocks (rank r's blocks, control by control) and folds the set's blocks in order.
   kernel.for_each_fixed_block(m, kBlock, [&](std::size_t b, std::size_t begin, std::size_t end) {
     double weight_sum = 0.0;  // the same for every control
-    for (std::size_t i = begin; i < end; ++i) weight_sum += weights_[i];
+    for (std::size_t i = begin; i < end; ++i) {
+      weights_[i] = std::exp(weights_[i]);
+      weight_sum += weights_[i];
+    }
     std::size_t k = 0;
     for (; k + 4 <= controls; k += 4)
       group_sums.template operator()<4>(k, b, begin, end, weight_sum);

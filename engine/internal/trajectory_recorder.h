@@ -1,12 +1,12 @@
 // Trajectory recording (FilterConfig::record_trajectory): the weighted-mean pose after every
 // control. A pass that runs queued controls first `begin`s (the weights are snapshot as
-// exp(l_i - max l), since the controls do not change them), lets the motion stage write x, y,
-// cos, sin per control and particle into `buffer()`, then `finish`es: the weighted means, per
-// control, over fixed blocks (every control's in one parallel call) folded in order as
-// ParticleKernel::reduce folds, so bit-identical for any thread count. A rank of a shared
-// particle set (parallel/collective.h) takes the largest log-weight of the set and folds every
-// rank's blocks, so every rank records the points one process would. Owns the buffer and the
-// points not yet taken; borrows the group.
+// l_i - max l, since the controls do not change them, and exponentiated in finish's parallel
+// blocks), lets the motion stage write x, y, cos, sin per control and particle into `buffer()`,
+// then `finish`es: the weighted means, per control, over fixed blocks (every control's in one
+// parallel call) folded in order as ParticleKernel::reduce folds, so bit-identical for any
+// thread count. A rank of a shared particle set (parallel/collective.h) takes the largest
+// log-weight of the set and folds every rank's blocks, so every rank records the points one
+// process would. Owns the buffer and the points not yet taken; borrows the group.
 // Thread safety: thread-compatible; the motion stage writes disjoint parts of the buffer
 // concurrently. Costs: begin O(M), finish O(M K) for K controls; the buffer (4 M K doubles) is
 // reused.
