@@ -19,6 +19,7 @@
 #include "memory/landmark_tree.h"
 #include "memory/node_heap.h"
 #include "memory/tree_graph.h"
+#include "tests/memory/graph_records.h"
 #include "tests/memory/heap_fixtures.h"
 
 namespace fastslam::memory {
@@ -257,47 +258,13 @@ TEST_F(NodeRegistryTest, ANameHeldAlreadyKeepsItsNode) {
   for (std::size_t i = 0; i < sent.size(); ++i) EXPECT_TRUE(second[i].shares_root_with(first[i]));
 }
 
-// Linked records appended by hand.
-class Linked {
- public:
-  Linked& leaf(std::uint32_t base, std::uint32_t mask, NodeId name) {
-    put<std::uint8_t>(0);
-    put(base);
-    put(mask);
-    for (int i = 0; i < 4; ++i) {
-      if (mask >> i & 1u) put(testing::tagged_landmark(1, base + i));
-    }
-    put(name);
-    return *this;
-  }
-  Linked& held(std::uint8_t height, std::uint32_t base, NodeId name) {
-    put<std::uint8_t>(3);
-    put(height);
-    put(base);
-    put(name);
-    return *this;
-  }
-  Linked& tree(std::uint8_t height, std::uint32_t root) {
-    put<std::uint8_t>(2);
-    put(height);
-    put(root);
-    return *this;
-  }
-  const std::string& bytes() const { return bytes_; }
-
- private:
-  template <class T>
-  void put(const T& v) {
-    bytes_.append(reinterpret_cast<const char*>(&v), sizeof(T));
-  }
-  std::string bytes_;
-};
+using Linked = testing::GraphRecords;
 
 TEST_F(NodeRegistryTest, BadLinkedRecordsAreRefusedByNameAndLeakNothing) {
   NodeRegistry b(other_heap_, 2);
   const NodeId known = node_id(1, 7);
   {
-    std::istringstream in(Linked().leaf(8, 3, known).tree(0, kNoNode).bytes());
+    std::istringstream in(Linked().leaf(8, 3).name(known).tree(0, kNoNode).bytes());
     TreeGraphReader reader(in, other_heap_, b);
     EXPECT_TRUE(reader.read([](Slot, const Landmark&) {}).empty());
   }
@@ -307,8 +274,8 @@ TEST_F(NodeRegistryTest, BadLinkedRecordsAreRefusedByNameAndLeakNothing) {
                                                " is not held here"},
       {Linked().held(1, 8, known), "has height 0 and base 8, not 1 and 8"},
       {Linked().held(0, 12, known), "has height 0 and base 8, not 0 and 12"},
-      {Linked().leaf(0, 1, node_id(kPinnedOrigin, 3)), "named as pinned"},
-      {Linked().leaf(8, 1, known), "differs from the node of that name"},
+      {Linked().leaf(0, 1).name(node_id(kPinnedOrigin, 3)), "named as pinned"},
+      {Linked().leaf(8, 1).name(known), "differs from the node of that name"},
       {Linked().held(0, 8, known).tree(0, 1), "root is not an earlier node"},
   };
   for (const auto& [graph, message] : cases) {

@@ -21,6 +21,7 @@
 
 #include "memory/landmark_tree.h"
 #include "memory/node_heap.h"
+#include "tests/memory/graph_records.h"
 #include "tests/memory/heap_fixtures.h"
 
 namespace fastslam::memory {
@@ -215,46 +216,7 @@ TEST_F(TreeGraphTest, EveryFlippedByteIsRefusedOrReadsAValidGraph) {
   EXPECT_GT(refused, 0);
 }
 
-// A hand-made graph: records appended one by one.
-class Graph {
- public:
-  Graph& leaf(std::uint32_t base, std::uint32_t mask) {
-    put<std::uint8_t>(0);
-    put(base);
-    put(mask);
-    for (int i = 0; i < 4; ++i) {
-      if (mask >> i & 1u) put(testing::tagged_landmark(1, base + i));
-    }
-    return *this;
-  }
-  Graph& inner(std::uint8_t height, std::uint32_t base, std::uint32_t mask,
-               std::vector<std::uint32_t> children) {
-    put<std::uint8_t>(1);
-    put(height);
-    put(base);
-    put(mask);
-    for (std::uint32_t c : children) put(c);
-    return *this;
-  }
-  Graph& tree(std::uint8_t height, std::uint32_t root) {
-    put<std::uint8_t>(2);
-    put(height);
-    put(root);
-    return *this;
-  }
-  Graph& raw(std::uint8_t byte) {
-    put(byte);
-    return *this;
-  }
-  const std::string& bytes() const { return bytes_; }
-
- private:
-  template <class T>
-  void put(const T& v) {
-    bytes_.append(reinterpret_cast<const char*>(&v), sizeof(T));
-  }
-  std::string bytes_;
-};
+using Graph = testing::GraphRecords;
 
 TEST_F(TreeGraphTest, MalformedGraphsAreRefusedByName) {
   const std::vector<std::tuple<std::string, Graph, std::string>> cases = {
