@@ -241,6 +241,25 @@ inline Landmark random_landmark(std::mt19937_64& rng, std::uint64_t id) {
   return l;
 }
 
+// One change a scan makes to a particle's tree: an insert (always on an empty tree; the new
+// landmark's id is `id`), an edit or an erase of a random landmark, a third each.
+template <class Tree>
+void random_scan_change(Tree& tree, std::mt19937_64& rng, std::uint64_t id) {
+  const int kind = static_cast<int>(rng() % 3);
+  if (kind == 0 || tree.empty()) {
+    tree.insert(random_landmark(rng, id));
+    return;
+  }
+  auto it = tree.begin();
+  for (std::uint64_t skip = rng() % tree.size(); skip > 0; --skip) ++it;
+  const Slot slot = (*it).slot;
+  if (kind == 1) {
+    tree.edit(slot).x += 1.0;
+  } else {
+    tree.erase(slot);
+  }
+}
+
 // A deterministic landmark for (tag, slot): lets many threads check contents with no oracle.
 inline Landmark tagged_landmark(std::uint64_t tag, Slot slot) {
   Landmark l;

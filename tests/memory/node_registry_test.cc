@@ -50,19 +50,7 @@ std::vector<LandmarkTree> next_set(NodeHeap& heap, std::mt19937_64& rng,
   while (static_cast<int>(trees.size()) < count) {
     LandmarkTree tree = from.empty() ? trees[rng() % trees.size()] : from[rng() % from.size()];
     for (int c = static_cast<int>(rng() % 4); c > 0; --c) {
-      const int kind = static_cast<int>(rng() % 3);
-      if (kind == 0 || tree.empty()) {
-        tree.insert(testing::random_landmark(rng, 7000 + c));
-        continue;
-      }
-      auto it = tree.begin();
-      for (std::uint64_t skip = rng() % tree.size(); skip > 0; --skip) ++it;
-      const Slot slot = (*it).slot;
-      if (kind == 1) {
-        tree.edit(slot).x += 1.0;
-      } else {
-        tree.erase(slot);
-      }
+      testing::random_scan_change(tree, rng, 7000 + c);
     }
     trees.push_back(tree);
   }

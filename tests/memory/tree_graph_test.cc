@@ -49,21 +49,7 @@ std::vector<LandmarkTree> particle_set(NodeHeap& heap, std::mt19937_64& rng, int
   for (int i = 1; i < count; ++i) {
     LandmarkTree tree = trees[rng() % trees.size()];
     const int changes = static_cast<int>(rng() % 4);
-    for (int c = 0; c < changes; ++c) {
-      const int kind = static_cast<int>(rng() % 3);
-      if (kind == 0 || tree.empty()) {
-        tree.insert(testing::random_landmark(rng, 1000 + i));
-      } else {
-        auto it = tree.begin();
-        for (std::uint64_t skip = rng() % tree.size(); skip > 0; --skip) ++it;
-        const Slot slot = (*it).slot;
-        if (kind == 1) {
-          tree.edit(slot).x += 1.0;
-        } else {
-          tree.erase(slot);
-        }
-      }
-    }
+    for (int c = 0; c < changes; ++c) testing::random_scan_change(tree, rng, 1000 + i);
     trees.push_back(tree);
   }
   return trees;
