@@ -569,6 +569,10 @@ void EkfSlam::observe(std::span<const Observation> scan) {
   s.update_seconds += seconds_between(t0, Clock::now());
 }
 
+const std::vector<ObservationAssociation>& EkfSlam::last_associations() const noexcept {
+  return impl_->report;
+}
+
 Estimate EkfSlam::estimate(EstimateMap map_part) const {
   const Impl& s = *impl_;
   Estimate e;

@@ -59,6 +59,8 @@ class EkfSlam {
   // landmark order (slot = index) with the 2x2 marginal covariances, id = the observations' id
   // in known mode and the landmark's index under ML, log_odds 0.
   Estimate estimate(EstimateMap map = EstimateMap::kCopy) const;
+  // The last scan's report, as Estimate::associations: O(1).
+  const std::vector<ObservationAssociation>& last_associations() const noexcept;
 
   // Counters and times (update_seconds = observe_wall_seconds = time in observe); no resampling;
   // live_nodes 0 and live_bytes = the bytes of the dense mean and covariance.

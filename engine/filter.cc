@@ -190,6 +190,10 @@ void Filter::set_map(std::span<const MapLandmark> landmarks) {
   s.landmark_variance_bound = checked.variance_bound;
 }
 
+const std::vector<ObservationAssociation>& Filter::last_associations() const noexcept {
+  return impl_->state.associations;
+}
+
 Estimate Filter::estimate(EstimateMap map_part) {
   impl_->drain();
   const internal::FilterState& s = impl_->state;

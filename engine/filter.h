@@ -220,6 +220,9 @@ class Filter {
 
   FilterStatistics statistics() const;
 
+  // The last scan's report, as Estimate::associations, without summarising the particles: O(1).
+  const std::vector<ObservationAssociation>& last_associations() const noexcept;
+
   // The weighted-mean pose after every control since the last call (drains the queue first).
   // Empty unless config.record_trajectory.
   std::vector<TrajectoryPoint> take_trajectory();

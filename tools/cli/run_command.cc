@@ -218,6 +218,7 @@ nlohmann::json run_state_json(const RunResult& r, const engine::FilterStatistics
           {"warnings", r.warnings},
           {"unknown_id_seen", r.unknown_id_seen},
           {"unlabelled_discarded", r.unlabelled_discarded},
+          {"innovations", r.innovations.state()},
           {"trace_scans", trace != nullptr ? trace->scans() : 0},
           {"seconds_per_phase",
            {st.predict_seconds, st.associate_seconds, st.update_seconds, st.resample_seconds}}};
@@ -233,6 +234,7 @@ std::uint64_t restore_run_state(const std::string& path, const nlohmann::json& j
     r.warnings = j.at("warnings").get<std::vector<std::string>>();
     r.unknown_id_seen = j.at("unknown_id_seen").get<bool>();
     r.unlabelled_discarded = j.at("unlabelled_discarded").get<std::uint64_t>();
+    r.innovations = InnovationStats::from_state(j.at("innovations"));
     const auto phases = j.at("seconds_per_phase").get<std::vector<double>>();
     if (phases.size() != 4) throw std::runtime_error("seconds_per_phase needs 4 values");
     before.predict_seconds = phases[0];
@@ -463,6 +465,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             const auto t_scan = Clock::now();
             filter.observe(scan, event.time);
             r.scan_latency.add(seconds_since(t_scan));
+            r.innovations.add(filter.last_associations());
           });
           if (const std::optional<std::int64_t> id = loop.truth.see(scan);
               id && !r.unknown_id_seen) {

@@ -102,6 +102,7 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
         {"p99", 1e3 * r.scan_latency.percentile(0.99)},
         {"max", 1e3 * r.scan_latency.max()},
         {"mean", 1e3 * r.scan_latency.mean()}}},
+      {"innovations", r.innovations.metrics()},
       {"resamples", st.resamples},
       {"log_evidence", st.log_evidence},
       {"live_tree_nodes", st.live_nodes},
@@ -114,6 +115,7 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
   if (r.input_error) m["input_error"] = *r.input_error;
   m["status"] = run_status(r);
   m["warnings"] = r.warnings;
+  if (const std::optional<std::string> wide = r.innovations.warning()) m["warnings"].push_back(*wide);
   const RecordedRun& t = r.trajectories;
   m["rpe_delta_m"] = *s.options.rpe_delta;
   if (t.filter.truth) {
@@ -235,6 +237,16 @@ void print_summary(const RunSettings& s, const RunResult& r, std::FILE* out) {
     std::fprintf(out, "  per scan: p50 %.3f ms, p99 %.3f ms, max %.3f ms\n",
                  1e3 * r.scan_latency.percentile(0.5), 1e3 * r.scan_latency.percentile(0.99),
                  1e3 * r.scan_latency.max());
+  }
+  if (r.innovations.associated() > 0) {
+    std::fprintf(out,
+                 "  innovations: %llu associated, mean NIS %.2f (2 expected), %.1f%% beyond the "
+                 "99%% bound (1%% expected)\n",
+                 static_cast<unsigned long long>(r.innovations.associated()), r.innovations.mean(),
+                 100.0 * r.innovations.beyond(2));
+  }
+  if (const std::optional<std::string> wide = r.innovations.warning()) {
+    std::fprintf(stderr, "warning: %s\n", wide->c_str());
   }
   if (worse_than_dead_reckoning(r)) {
     std::fprintf(stderr,

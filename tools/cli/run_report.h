@@ -21,6 +21,7 @@
 #include "tools/cli/run_command.h"
 #include "tools/cli/run_recorder.h"
 #include "tools/datasets/source.h"
+#include "tools/eval/innovation_stats.h"
 #include "tools/eval/latency_histogram.h"
 #include "tools/eval/map_evaluation.h"
 #include "tools/eval/map_metrics.h"
@@ -52,6 +53,8 @@ struct RunResult {
   // Each scan's update (Filter::observe, what a streaming caller waits for per scan) in this
   // process: after a resume, the scans since it.
   LatencyHistogram scan_latency;
+  // The associations' distances against the noise model, every scan of the run.
+  InnovationStats innovations;
   // Or "--max-steps", "--max-seconds", "input error", "error", "SIGINT", "SIGTERM".
   std::string ended_by = "end of data";
   std::optional<std::string> input_error;  // the source's message, when it ended the run

@@ -8,6 +8,7 @@
 #include <numbers>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <unistd.h>
 #include <unordered_map>
 #include <vector>
@@ -61,6 +62,17 @@ TEST(RunCommand, WebmapWritesTheContractedOutputs) {
   EXPECT_LE(latency["p90"].get<double>(), latency["p99"].get<double>());
   EXPECT_LE(latency["p99"].get<double>(), latency["max"].get<double>());
   EXPECT_LE(latency["mean"].get<double>() * 1931 / 1e3, m["wall_seconds"].get<double>());
+  // Every observation of the best particle is reported: associated, or a first sighting (35
+  // landmarks, at most 35 started). The simulator draws the noise the filter assumes: no
+  // warning. (The most likely particle's distances run small, the weights having picked it;
+  // the EKF's below follow the law.)
+  const nlohmann::json& innovations = m["innovations"];
+  EXPECT_EQ(innovations["associated"].get<std::uint64_t>() +
+                innovations["started"].get<std::uint64_t>(),
+            m["observations"].get<std::uint64_t>());
+  EXPECT_LE(innovations["started"].get<int>(), 35);
+  EXPECT_LT(innovations["beyond_chi2_99"].get<double>(), 0.05);
+  EXPECT_TRUE(m["warnings"].empty()) << m["warnings"];
   EXPECT_EQ(m["particles"], 100);
   EXPECT_EQ(m["algorithm"], "fastslam1");
   EXPECT_GT(m["landmarks"].get<int>(), 25);
@@ -591,6 +603,16 @@ TEST(RunCommand, EkfOnWebmapWritesTheSameOutputs) {
   EXPECT_EQ(m["steps"], 17382);
   EXPECT_EQ(m["scans"], 1931);
   EXPECT_EQ(m["landmarks"], 30);  // of 35: the ones the route sees, as FastSLAM's
+  // A consistent filter on data drawn from its own model: each fraction beyond the chi-square
+  // points within 5 binomial standard errors of the law's, over the ~2000 associations.
+  const nlohmann::json& innovations = m["innovations"];
+  const double n = innovations["associated"].get<double>();
+  EXPECT_GT(n, 1900);
+  EXPECT_EQ(innovations["started"], 30);
+  for (const auto& [key, p] : {std::pair{"beyond_chi2_50", 0.5}, std::pair{"beyond_chi2_95", 0.05},
+                               std::pair{"beyond_chi2_99", 0.01}}) {
+    EXPECT_NEAR(innovations[key].get<double>(), p, 5.0 * std::sqrt(p * (1.0 - p) / n)) << key;
+  }
   // Seed 1 measured 4.2 m (seeds 1..10: 4.6 +- 1.5 m, engine/ekf_slam_test.cc).
   EXPECT_LT(m["pose_rmse_m"].get<double>(), 10.0);
   EXPECT_LT(m["landmark_rmse_m"].get<double>(), 10.0);
