@@ -193,6 +193,11 @@ void add_utias_options(CLI::App& cmd, RunOptions& o) {
       ->check(whole_number<int>())
       ->check(CLI::Range(1, kUtiasRobots))
       ->capture_default_str();
+  cmd.add_option("--utias-odometry-lead", o.utias.odometry_lead,
+                 "utias: seconds the odometry leads the robot's motion; each control is stamped "
+                 "this much later (default: the robot's calibrated lead, 0.14-0.22 s; 0: the "
+                 "rows' times)")
+      ->check(CLI::Range(0.0, kUtiasMaxOdometryLead));
 }
 
 // The Victoria Park reader's options (run and convert): heading fit, control cuts, the gate.

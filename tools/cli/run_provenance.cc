@@ -12,6 +12,7 @@
 
 #include "engine/enum_names.h"
 #include "tools/datasets/sim_source.h"
+#include "tools/datasets/utias.h"
 #include "tools/io/sha256.h"
 
 namespace fastslam::tools {
@@ -124,6 +125,8 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"vp-max-diameter",
        std::isfinite(gate.max_diameter) ? nlohmann::json(gate.max_diameter) : nullptr},
       {"robot", o.utias.robot},
+      {"utias-odometry-lead", o.source == "utias" ? nlohmann::json(utias_odometry_lead(o.utias))
+                                                  : nlohmann::json(or_null(o.utias.odometry_lead))},
       // Outputs and budgets.
       {"out", path_or_null(o.out)},
       {"trace", path_or_null(o.trace)},

@@ -115,7 +115,8 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
   if (r.input_error) m["input_error"] = *r.input_error;
   m["status"] = run_status(r);
   m["warnings"] = r.warnings;
-  if (const std::optional<std::string> wide = r.innovations.warning()) m["warnings"].push_back(*wide);
+  if (const std::optional<std::string> wide = r.innovations.warning())
+    m["warnings"].push_back(*wide);
   const RecordedRun& t = r.trajectories;
   m["rpe_delta_m"] = *s.options.rpe_delta;
   if (t.filter.truth) {

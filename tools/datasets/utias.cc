@@ -149,6 +149,11 @@ std::size_t repair_headings(std::vector<std::array<double, 3>>& poses) {
 
 }  // namespace
 
+double utias_odometry_lead(const UtiasOptions& options) {
+  return options.odometry_lead ? *options.odometry_lead
+                               : kUtiasOdometryLead[static_cast<std::size_t>(options.robot - 1)];
+}
+
 Utias read_utias(const std::string& dir, const UtiasOptions& options) {
   if (options.robot < 1 || options.robot > kUtiasRobots) {
     throw std::invalid_argument("UTIAS MRCLAM: robot must be 1.." + std::to_string(kUtiasRobots) +
@@ -156,6 +161,12 @@ Utias read_utias(const std::string& dir, const UtiasOptions& options) {
   }
   if (options.truth_every < 1) {
     throw std::invalid_argument("UtiasOptions: truth_every must be >= 1");
+  }
+  const double lead = utias_odometry_lead(options);
+  if (!(lead >= 0.0 && lead <= kUtiasMaxOdometryLead)) {
+    throw std::invalid_argument("UTIAS MRCLAM: the odometry lead must be 0.." +
+                                std::to_string(kUtiasMaxOdometryLead) + " s (got " +
+                                std::to_string(lead) + ")");
   }
   Utias out;
   out.robot = options.robot;
@@ -201,7 +212,8 @@ Utias read_utias(const std::string& dir, const UtiasOptions& options) {
     }
   }
 
-  // Controls: sample k held over [0.02 k, 0.02 (k + 1)), stamped at the end.
+  // Controls: sample k held over [0.02 k, 0.02 (k + 1)), stamped at the end, both `lead` later:
+  // the motion the odometry measures happens that much after its row's time.
   {
     TableReader reader(dir, file_of(options.robot, "Odometry"), {"time", "v", "omega"});
     while (reader.next(row)) {
@@ -209,7 +221,7 @@ Utias read_utias(const std::string& dir, const UtiasOptions& options) {
       check_row_time(reader, row[0], k);
       Event e;
       e.kind = EventKind::kControl;
-      e.time = static_cast<double>(k + 1) / 50.0;
+      e.time = static_cast<double>(k + 1) / 50.0 + lead;
       e.dt = kUtiasPeriod;
       e.control = {row[1], row[2]};
       events.push_back(e);

@@ -12,7 +12,9 @@
 // Costs: O(rows) time (about 160,000 rows per robot) and memory (about 10 MB per robot).
 #pragma once
 
+#include <array>
 #include <cstddef>
+#include <optional>
 #include <string>
 
 #include "tools/io/log_format.h"
@@ -30,6 +32,9 @@ inline constexpr double kUtiasSigmaRange = 0.116;     // m
 inline constexpr double kUtiasSigmaBearing = 0.0103;  // rad
 inline constexpr double kUtiasMaxRange = 7.32;        // m
 inline constexpr double kUtiasFieldOfView = 1.06;     // rad
+// Seconds each robot's odometry leads its Vicon motion (the shift that best aligns the two,
+// from the same script), robots 1-5: the reader stamps every control this much later.
+inline constexpr std::array<double, 5> kUtiasOdometryLead = {0.14, 0.14, 0.16, 0.16, 0.22};
 
 inline constexpr int kUtiasRobots = 5;             // subjects 1-5; the others are landmarks
 inline constexpr double kUtiasPeriod = 0.02;       // s: odometry and Vicon rows, 50 Hz from 0
@@ -49,7 +54,16 @@ struct UtiasOptions {
   // dropped (known association refuses them). Counted either way. `--source utias` sets it
   // from SourceOptions::clutter.
   bool unlabelled = true;
+  // Seconds the odometry leads the motion, in [0, kUtiasMaxOdometryLead]: each control is
+  // stamped this much later than its row. Unset: the robot's kUtiasOdometryLead; 0: the rows'
+  // own times.
+  std::optional<double> odometry_lead;
 };
+inline constexpr double kUtiasMaxOdometryLead = 1.0;  // s
+
+// The lead `options` gives: its odometry_lead, else the robot's calibrated one. REQUIRES: a
+// robot in 1..kUtiasRobots.
+double utias_odometry_lead(const UtiasOptions& options);
 
 struct Utias {
   Log log;
@@ -69,7 +83,8 @@ struct Utias {
 
 // Reads Barcodes.dat, Landmark_Groundtruth.dat and RobotN_{Odometry,Measurement,Groundtruth}.dat
 // from `dir` (the dataset1 directory). Throws std::invalid_argument for a robot outside
-// 1..kUtiasRobots or truth_every < 1, std::runtime_error for a missing file (naming it and
+// 1..kUtiasRobots, truth_every < 1 or an odometry lead outside [0, kUtiasMaxOdometryLead],
+// std::runtime_error for a missing file (naming it and
 // what `dir` should be) or a malformed row (see the file comment).
 Utias read_utias(const std::string& dir, const UtiasOptions& options = {});
 

@@ -12,7 +12,9 @@ velocities (the path projected on the heading, the unwrapped heading change). Th
 model (engine/motion_model.h) perturbs each 50 Hz sample's control by sigma n with a fresh
 standard normal n, so a window of n samples averages to sigma / sqrt(n): the per-sample sigma
 is the window's robust sigma x sqrt(n). The odometry leads the Vicon motion (the robots'
-response delay); the lag that best aligns them is reported, not applied.
+response delay): the shift that best aligns them is each robot's lead, which the reader takes
+off (kUtiasOdometryLead); the sigmas are those of the odometry as recorded, lead included
+(docs/utias.md says why).
 
 Owns no state; reads about 1.1 million rows (about 3 s in Python).
 Usage: tools/scripts/utias_calibrate.py [--data DIR] [--robots 1,2,...] [--window S]
@@ -240,6 +242,11 @@ def report(result):
     for name, value in result["constants"].items():
         lines.append("inline constexpr double {} = {:.3g};  // {}".format(
             name, rounded(value), units[name]))
+    leads = [-result["rows"][str(r)]["lag_s"] for r in ROBOTS if str(r) in result["rows"]]
+    if len(leads) == len(ROBOTS):
+        lines.append("inline constexpr std::array<double, {}> kUtiasOdometryLead = {{{}}};  "
+                     "// s, robots 1-{}".format(len(leads), ", ".join(
+                         "{:.2f}".format(lead) for lead in leads), len(leads)))
     return "\n".join(lines)
 
 

@@ -8,9 +8,9 @@
 #include <numbers>
 #include <sstream>
 #include <string>
-#include <utility>
 #include <unistd.h>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -67,9 +67,9 @@ TEST(RunCommand, WebmapWritesTheContractedOutputs) {
   // warning. (The most likely particle's distances run small, the weights having picked it;
   // the EKF's below follow the law.)
   const nlohmann::json& innovations = m["innovations"];
-  EXPECT_EQ(innovations["associated"].get<std::uint64_t>() +
-                innovations["started"].get<std::uint64_t>(),
-            m["observations"].get<std::uint64_t>());
+  EXPECT_EQ(
+      innovations["associated"].get<std::uint64_t>() + innovations["started"].get<std::uint64_t>(),
+      m["observations"].get<std::uint64_t>());
   EXPECT_LE(innovations["started"].get<int>(), 35);
   EXPECT_LT(innovations["beyond_chi2_99"].get<double>(), 0.05);
   EXPECT_TRUE(m["warnings"].empty()) << m["warnings"];

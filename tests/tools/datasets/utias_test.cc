@@ -4,6 +4,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <limits>
 #include <map>
 #include <numbers>
 #include <sstream>
@@ -114,7 +116,9 @@ TEST(UtiasData, RobotOneCountsAndOneTimeOrder) {
 // exact time 0.02 k, scans keep the printed time.
 TEST(UtiasData, RowIndexGivesTheTimePastOneThousandSeconds) {
   FASTSLAM_REQUIRE_SHARED(shared);
-  const Utias u = read_utias(dataset(shared));
+  UtiasOptions rows_own_times;
+  rows_own_times.odometry_lead = 0.0;
+  const Utias u = read_utias(dataset(shared), rows_own_times);
   std::vector<double> control_times, truth_times;
   for (const Event& e : u.log.events) {
     if (e.kind == EventKind::kControl) control_times.push_back(e.time);
@@ -234,11 +238,15 @@ TEST_F(UtiasFiles, SortsDetectionsIntoLandmarksRobotsAndUnlabelled) {
   // Swapped back in the truth as well.
   EXPECT_EQ(landmark(u.log, 11).x, 3.0);
   EXPECT_EQ(landmark(u.log, 17).x, 1.0);
-  // Controls stamped at the end of their 20 ms; the scan at 0.04 after the control ending there.
+  // Controls stamped at the end of their 20 ms and robot 1's lead (0.14 s) later: the first
+  // comes after the scans at 0.02-0.08 and the truth pose at 0.
   EXPECT_EQ(u.log.events[0].kind, EventKind::kTruthPose);
-  EXPECT_EQ(u.log.events[1].kind, EventKind::kControl);
-  EXPECT_EQ(u.log.events[1].time, 0.02);
-  EXPECT_EQ(u.log.events[2].kind, EventKind::kScan);
+  EXPECT_EQ(u.log.events[1].kind, EventKind::kScan);
+  const auto first_control =
+      std::find_if(u.log.events.begin(), u.log.events.end(),
+                   [](const Event& e) { return e.kind == EventKind::kControl; });
+  ASSERT_NE(first_control, u.log.events.end());
+  EXPECT_EQ(first_control->time, 0.02 + kUtiasOdometryLead[0]);
   EXPECT_EQ(u.log.header.start_pose[2], engine::wrap_angle(3.0));
   // Dropping the unlabelled: still counted, no scan at 0.04.
   UtiasOptions options;
@@ -247,6 +255,53 @@ TEST_F(UtiasFiles, SortsDetectionsIntoLandmarksRobotsAndUnlabelled) {
   EXPECT_EQ(known.unlabelled_detections, 1u);
   EXPECT_EQ(known.scans, 3u);
   for (const engine::Observation& z : known.log.observations) EXPECT_GE(z.id, 0);
+}
+
+// The odometry lead moves every control, and nothing else, that much later; the events stay in
+// one time order (control before scan on equal times). Lead 0 keeps the rows' times.
+TEST_F(UtiasFiles, OdometryLeadStampsControlsLater) {
+  write(files_);
+  auto controls = [](const Utias& u) {
+    std::vector<double> times;
+    for (const Event& e : u.log.events) {
+      if (e.kind == EventKind::kControl) times.push_back(e.time);
+    }
+    return times;
+  };
+  UtiasOptions options;
+  options.odometry_lead = 0.0;
+  const Utias own = read_utias(dir_, options);
+  EXPECT_EQ(controls(own), (std::vector<double>{0.02, 0.04, 0.06, 0.08, 0.1}));
+  EXPECT_EQ(own.log.events[1].kind, EventKind::kControl);  // ends at 0.02, before that scan
+  options.odometry_lead = 0.04;
+  const Utias led = read_utias(dir_, options);
+  const std::vector<double> shifted = controls(led);
+  ASSERT_EQ(shifted.size(), 5u);
+  for (std::size_t k = 0; k < 5; ++k) EXPECT_EQ(shifted[k], static_cast<double>(k + 1) / 50 + 0.04);
+  EXPECT_EQ(led.log.observations.size(), own.log.observations.size());
+  for (std::size_t k = 1; k < led.log.events.size(); ++k) {
+    const Event& a = led.log.events[k - 1];
+    const Event& b = led.log.events[k];
+    ASSERT_TRUE(a.time < b.time || (a.time == b.time && a.kind <= b.kind)) << k;
+  }
+  // The scan at 0.06 comes after the control that ends there now (row 0's).
+  const auto scan_at =
+      std::find_if(led.log.events.begin(), led.log.events.end(),
+                   [](const Event& e) { return e.kind == EventKind::kScan && e.time == 0.06; });
+  ASSERT_NE(scan_at, led.log.events.end());
+  EXPECT_EQ(std::prev(scan_at)->kind, EventKind::kControl);
+  // Unset: the robot's calibrated lead; out of range or NaN: refused, naming the bound.
+  EXPECT_EQ(utias_odometry_lead(UtiasOptions{}), kUtiasOdometryLead[0]);
+  for (double bad : {-0.01, 1.5, std::numeric_limits<double>::quiet_NaN()}) {
+    options.odometry_lead = bad;
+    try {
+      read_utias(dir_, options);
+      ADD_FAILURE() << bad;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("odometry lead must be 0.."), std::string::npos)
+          << e.what();
+    }
+  }
 }
 
 TEST_F(UtiasFiles, RefusesEveryMalformedClassNamingFileLineAndReason) {

@@ -17,9 +17,7 @@ namespace {
 using engine::AssociationOutcome;
 using engine::ObservationAssociation;
 
-ObservationAssociation associated(double m2) {
-  return {0, AssociationOutcome::kAssociated, 1, m2};
-}
+ObservationAssociation associated(double m2) { return {0, AssociationOutcome::kAssociated, 1, m2}; }
 
 TEST(InnovationStatsTest, PointsAreTheChiSquareTwoUpperTails) {
   for (const InnovationStats::Point& p : InnovationStats::kPoints) {
@@ -95,7 +93,7 @@ TEST(InnovationStatsTest, CountsOutcomesAndNonFiniteDistances) {
   EXPECT_EQ(stats.associated(), 4u);
   EXPECT_EQ(stats.started(), 1u);
   EXPECT_EQ(stats.discarded(), 1u);
-  EXPECT_DOUBLE_EQ(stats.mean(), 3.5);  // the finite ones: (1 + 6) / 2
+  EXPECT_DOUBLE_EQ(stats.mean(), 3.5);      // the finite ones: (1 + 6) / 2
   EXPECT_DOUBLE_EQ(stats.beyond(0), 0.75);  // 6, inf, NaN beyond 1.39
   EXPECT_DOUBLE_EQ(stats.beyond(1), 0.75);  // 6 > 5.99
   EXPECT_DOUBLE_EQ(stats.beyond(2), 0.5);   // inf, NaN
@@ -129,7 +127,8 @@ TEST(InnovationStatsTest, EmptyReportsNull) {
 // A checkpoint's state brings back the same metrics, the mean's bits included, through JSON text.
 TEST(InnovationStatsTest, StateRoundTripsExactly) {
   InnovationStats stats;
-  const std::vector<ObservationAssociation> scan = {associated(0.1), associated(1.0 / 3.0),
+  const std::vector<ObservationAssociation> scan = {associated(0.1),
+                                                    associated(1.0 / 3.0),
                                                     associated(7.7),
                                                     {3, AssociationOutcome::kNew, 9, 0.0}};
   for (int k = 0; k < 3; ++k) stats.add(scan);

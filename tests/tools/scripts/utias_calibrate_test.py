@@ -35,8 +35,9 @@ def check(condition, message):
         print("FAIL:", message)
 
 
-def synthetic(out, seed=3, seconds=600):
-    """Writes Barcodes.dat, Landmark_Groundtruth.dat and Robot1_*.dat into `out`."""
+def synthetic(out, seed=3, seconds=600, lead=0):
+    """Writes Barcodes.dat, Landmark_Groundtruth.dat and Robot1_*.dat into `out`; the
+    odometry leads the motion by `lead` rows (row k holds the control of row k + lead)."""
     rng = np.random.default_rng(seed)
     rows = int(seconds / uc.PERIOD)
     marks = {s: rng.uniform(-5, 5, 2) for s in range(6, 21)}
@@ -68,7 +69,8 @@ def synthetic(out, seed=3, seconds=600):
         return "{:.5g}".format(k * uc.PERIOD)
 
     with open(os.path.join(out, "Robot1_Odometry.dat"), "w") as f:
-        f.writelines("{} {:.6f} {:.6f}\n".format(stamp(k), *odometry[k]) for k in range(rows))
+        f.writelines("{} {:.6f} {:.6f}\n".format(stamp(k), *odometry[min(k + lead, rows - 1)])
+                     for k in range(rows))
     with open(os.path.join(out, "Robot1_Groundtruth.dat"), "w") as f:
         f.writelines("{} {:.6f} {:.6f} {:.6f}\n".format(
             stamp(k), pose[k, 0], pose[k, 1], math.atan2(math.sin(pose[k, 2]),
@@ -117,6 +119,15 @@ def test_synthetic(tmp):
     return out
 
 
+def test_synthetic_lead(tmp):
+    """Odometry that leads the motion by 8 rows (0.16 s): the lag found is -0.16 s."""
+    out = os.path.join(tmp, "synthetic_lead")
+    os.makedirs(out)
+    synthetic(out, lead=8)
+    row = uc.calibrate(out, robots=[1], window=1.0)["rows"]["1"]
+    check(abs(row["lag_s"] + 0.16) <= 0.021, "synthetic lead 0.16 s: lag {} s".format(row["lag_s"]))
+
+
 def run(args):
     return subprocess.run([sys.executable, SCRIPT] + args, capture_output=True, text=True)
 
@@ -150,6 +161,12 @@ def printed_constants(text):
         r"inline constexpr double (kUtias\w+) = ([0-9.eE+-]+);", text)}
 
 
+def printed_leads(text):
+    m = re.search(r"inline constexpr std::array<double, 5> kUtiasOdometryLead = \{([^}]*)\};",
+                  text)
+    return None if m is None else [float(v) for v in m.group(1).split(",")]
+
+
 def test_real():
     shared = os.environ.get("FASTSLAM_SHARED_DIR", os.path.join(ROOT, "..", "shared"))
     data = os.path.join(shared, "data", "utias_mrclam", "dataset1")
@@ -169,6 +186,11 @@ def test_real():
         unit = 10 ** (math.floor(math.log10(abs(value))) - 2)
         check(name in shipped and abs(shipped[name] - value) <= 0.5 * unit + 1e-12,
               "{}: utias.h has {}, the script prints {}".format(name, shipped.get(name), value))
+    with open(HEADER) as f:
+        shipped_leads = printed_leads(f.read())
+    leads = printed_leads(done.stdout)
+    check(leads is not None and leads == shipped_leads,
+          "kUtiasOdometryLead: utias.h has {}, the script prints {}".format(shipped_leads, leads))
 
 
 def main():
@@ -177,6 +199,7 @@ def main():
     else:
         with tempfile.TemporaryDirectory() as tmp:
             good = test_synthetic(tmp)
+            test_synthetic_lead(tmp)
             test_errors(tmp, good)
     if failures:
         print("{} failure(s)".format(len(failures)))
