@@ -219,6 +219,7 @@ nlohmann::json run_state_json(const RunResult& r, const engine::FilterStatistics
           {"unknown_id_seen", r.unknown_id_seen},
           {"unlabelled_discarded", r.unlabelled_discarded},
           {"innovations", r.innovations.state()},
+          {"innovations_at_trace_row", r.innovations_at_trace_row.state()},
           {"trace_scans", trace != nullptr ? trace->scans() : 0},
           {"seconds_per_phase",
            {st.predict_seconds, st.associate_seconds, st.update_seconds, st.resample_seconds}}};
@@ -235,6 +236,7 @@ std::uint64_t restore_run_state(const std::string& path, const nlohmann::json& j
     r.unknown_id_seen = j.at("unknown_id_seen").get<bool>();
     r.unlabelled_discarded = j.at("unlabelled_discarded").get<std::uint64_t>();
     r.innovations = InnovationStats::from_state(j.at("innovations"));
+    r.innovations_at_trace_row = InnovationStats::from_state(j.at("innovations_at_trace_row"));
     const auto phases = j.at("seconds_per_phase").get<std::vector<double>>();
     if (phases.size() != 4) throw std::runtime_error("seconds_per_phase needs 4 values");
     before.predict_seconds = phases[0];
@@ -307,7 +309,8 @@ void trace_row(F& filter, const RunLoop& loop, std::optional<StampedPose> truth,
     }
   }
   loop.trace->row(time, pose_error, map_error, now.map.size(), loop.truth.observed_count(),
-                  particles);
+                  particles, r.innovations.since(r.innovations_at_trace_row));
+  r.innovations_at_trace_row = r.innovations;
 }
 
 // The scan as the filter takes it: under mixed association without its unlabelled detections

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fcntl.h>
@@ -73,12 +74,14 @@ TraceWriter::TraceWriter(const std::string& path, std::uint64_t every, bool keep
     : every_(every == 0 ? 1 : every), file_(open_trace(path)), keep_(keep_text) {
   write(
       "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks,n_eff,"
-      "distinct_particles,particle_spread_m,truth_spreads,nearest_weight\n");
+      "distinct_particles,particle_spread_m,truth_spreads,nearest_weight,nis_mean,"
+      "landmarks_started\n");
 }
 
 void TraceWriter::row(double t, std::optional<double> pose_error, std::optional<double> map_error,
                       std::size_t landmarks, std::size_t observed,
-                      const std::optional<ParticleDiagnostics>& particles) {
+                      const std::optional<ParticleDiagnostics>& particles,
+                      const InnovationStats& since_last) {
   TextLine line;
   line.fixed(t, 3).put(',').integer(scans_ - 1).put(',');
   if (pose_error) line.fixed(*pose_error, 6);
@@ -95,6 +98,9 @@ void TraceWriter::row(double t, std::optional<double> pose_error, std::optional<
   } else {
     line.text(",,,,");
   }
+  line.put(',');
+  if (const double nis = since_last.mean(); !std::isnan(nis)) line.fixed(nis, 6);
+  line.put(',').integer(since_last.started());
   write(line.put('\n').view());
 }
 

@@ -21,6 +21,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "engine/filter.h"
+#include "tools/eval/innovation_stats.h"
 #include "tools/eval/particle_diagnostics.h"
 #include "tools/io/atomic_file.h"
 #include "tools/io/log_format.h"
@@ -28,9 +29,10 @@
 namespace fastslam::tools {
 
 // `--trace`: one row every `every` scans, "t,scan,pose_error_m,landmark_rmse_m,landmarks,
-// observed_landmarks,n_eff,distinct_particles,particle_spread_m,truth_spreads,nearest_weight"
-// (the particle set's diagnostics, tools/eval/particle_diagnostics.h), an absent value left
-// empty.
+// observed_landmarks,n_eff,distinct_particles,particle_spread_m,truth_spreads,nearest_weight,
+// nis_mean,landmarks_started" (the particle set's diagnostics, tools/eval/particle_diagnostics.h;
+// the scan reports' mean NIS and new landmarks since the previous row,
+// tools/eval/innovation_stats.h), an absent value left empty.
 class TraceWriter {
  public:
   // Throws std::runtime_error "--trace PATH: ..." when PATH cannot be written (a directory,
@@ -46,7 +48,7 @@ class TraceWriter {
   bool due() { return scans_++ % every_ == 0; }
   void row(double t, std::optional<double> pose_error, std::optional<double> map_error,
            std::size_t landmarks, std::size_t observed,
-           const std::optional<ParticleDiagnostics>& particles);
+           const std::optional<ParticleDiagnostics>& particles, const InnovationStats& since_last);
   // Puts the rows so far in place (also after an interrupted or failed run). Throws
   // std::runtime_error when the file could not be written.
   void close();

@@ -53,8 +53,10 @@ struct RunResult {
   // Each scan's update (Filter::observe, what a streaming caller waits for per scan) in this
   // process: after a resume, the scans since it.
   LatencyHistogram scan_latency;
-  // The associations' distances against the noise model, every scan of the run.
+  // The associations' distances against the noise model, every scan of the run; and as they
+  // stood at the last --trace row (its next row reports the scans since).
   InnovationStats innovations;
+  InnovationStats innovations_at_trace_row;
   // Or "--max-steps", "--max-seconds", "input error", "error", "SIGINT", "SIGTERM".
   std::string ended_by = "end of data";
   std::optional<std::string> input_error;  // the source's message, when it ended the run

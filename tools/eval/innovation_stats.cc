@@ -43,6 +43,17 @@ double InnovationStats::beyond(std::size_t k) const noexcept {
                           : static_cast<double>(beyond_[k]) / static_cast<double>(associated_);
 }
 
+InnovationStats InnovationStats::since(const InnovationStats& earlier) const noexcept {
+  InnovationStats d;
+  d.associated_ = associated_ - earlier.associated_;
+  d.finite_ = finite_ - earlier.finite_;
+  d.started_ = started_ - earlier.started_;
+  d.discarded_ = discarded_ - earlier.discarded_;
+  for (std::size_t k = 0; k < beyond_.size(); ++k) d.beyond_[k] = beyond_[k] - earlier.beyond_[k];
+  d.sum_ = sum_ - earlier.sum_;
+  return d;
+}
+
 std::optional<std::string> InnovationStats::warning() const {
   const std::size_t last = kPoints.size() - 1;
   if (associated_ < kMinimum || beyond(last) < kWide * kPoints[last].tail) return std::nullopt;

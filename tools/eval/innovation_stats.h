@@ -55,6 +55,10 @@ class InnovationStats {
   static constexpr double kWide = 5.0;
   std::optional<std::string> warning() const;
 
+  // What was counted after `earlier` (an earlier copy of this one): the counts' differences
+  // and the difference of the running sums. REQUIRES: `earlier` is such a copy.
+  InnovationStats since(const InnovationStats& earlier) const noexcept;
+
   // metrics.json's object, and the checkpoint's state (exact: counts and the sum's bits).
   nlohmann::json metrics() const;
   nlohmann::json state() const;

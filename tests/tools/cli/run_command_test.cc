@@ -696,7 +696,8 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     const auto rows = csv_rows(traced.trace, &header);
     EXPECT_EQ(header,
               "t,scan,pose_error_m,landmark_rmse_m,landmarks,observed_landmarks,n_eff,"
-              "distinct_particles,particle_spread_m,truth_spreads,nearest_weight");
+              "distinct_particles,particle_spread_m,truth_spreads,nearest_weight,nis_mean,"
+              "landmarks_started");
     ASSERT_EQ(rows.size(), m["scans"].get<std::size_t>());
     // Oracle for the pose error: the written trajectory and truth at the row's time.
     std::unordered_map<std::string, std::pair<double, double>> estimate, truth;
@@ -707,9 +708,15 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
       truth[r[0]] = {std::stod(r[1]), std::stod(r[2])};
     }
     std::size_t observed = 0;
+    std::uint64_t started = 0;
     for (std::size_t i = 0; i < rows.size(); ++i) {
       const auto& r = rows[i];
-      ASSERT_EQ(r.size(), 11u) << i;
+      ASSERT_EQ(r.size(), 13u) << i;
+      // The scan's report: its mean NIS (empty when nothing was associated) and new landmarks.
+      if (!r[11].empty()) {
+        EXPECT_GE(std::stod(r[11]), 0.0) << i;
+      }
+      started += std::stoull(r[12]);
       // The particle set's diagnostics: N_eff and the survivors within 1..M; one particle is
       // its own mean and the nearest, at the average weight.
       const double m_particles = static_cast<double>(c.particles);
@@ -738,6 +745,7 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
       observed = std::stoul(r[5]);
     }
     EXPECT_EQ(observed, m["observed_landmarks"].get<std::size_t>());
+    EXPECT_EQ(started, m["innovations"]["started"].get<std::uint64_t>());
     EXPECT_EQ(std::stoul(rows.back()[4]), m["landmarks"].get<std::size_t>());
     EXPECT_NEAR(std::stod(rows.back()[3]), m["landmark_rmse_m"].get<double>(), 1e-6);
 
@@ -750,8 +758,17 @@ TEST(RunCommand, TraceRecordsErrorsOverTimeWithoutChangingTheRun) {
     const auto sparse_rows = csv_rows(sparse.trace, nullptr);
     ASSERT_EQ(sparse_rows.size(), (rows.size() + 6) / 7);
     for (std::size_t i = 0; i < sparse_rows.size(); ++i) {
-      EXPECT_EQ(sparse_rows[i], rows[7 * i]) << i;
+      // The same state; the report's columns cover the scans since the previous row.
+      EXPECT_TRUE(
+          std::equal(sparse_rows[i].begin(), sparse_rows[i].begin() + 11, rows[7 * i].begin()))
+          << i;
+      std::uint64_t started_since = 0;
+      for (std::size_t k = i == 0 ? 0 : 7 * i - 6; k <= 7 * i; ++k) {
+        started_since += std::stoull(rows[k][12]);
+      }
+      EXPECT_EQ(std::stoull(sparse_rows[i][12]), started_since) << i;
     }
+    EXPECT_EQ(sparse_rows[0], rows[0]);
     for (const std::string& dir : {o.out, traced.out}) std::filesystem::remove_all(dir);
     std::filesystem::remove(traced.trace);
     std::filesystem::remove(sparse.trace);

@@ -113,6 +113,35 @@ TEST(InnovationStatsTest, WarnsOnlyWithEnoughAssociationsAndFromFiveTimesTheTail
   EXPECT_FALSE(with(951, 49).warning().has_value());  // 4.9 %
 }
 
+// since(): what the later scans added, as if counted alone (the mean from the difference of
+// the running sums, to rounding).
+TEST(InnovationStatsTest, SinceIsWhatTheLaterScansAdded) {
+  const std::vector<ObservationAssociation> early = {
+      associated(0.5), associated(12.0), {1, AssociationOutcome::kNew, 3, 0.0}};
+  const std::vector<ObservationAssociation> late = {
+      associated(2.0),
+      associated(7.0),
+      associated(std::numeric_limits<double>::infinity()),
+      {3, AssociationOutcome::kNew, 4, 0.0},
+      {4, AssociationOutcome::kDiscarded, 0, 1.0}};
+  InnovationStats run;
+  run.add(early);
+  const InnovationStats at_row = run;
+  run.add(late);
+  InnovationStats alone;
+  alone.add(late);
+  const InnovationStats since = run.since(at_row);
+  EXPECT_EQ(since.associated(), alone.associated());
+  EXPECT_EQ(since.started(), alone.started());
+  EXPECT_EQ(since.discarded(), alone.discarded());
+  for (std::size_t k = 0; k < InnovationStats::kPoints.size(); ++k) {
+    EXPECT_EQ(since.beyond(k), alone.beyond(k)) << k;
+  }
+  EXPECT_NEAR(since.mean(), alone.mean(), 1e-12);
+  EXPECT_TRUE(std::isnan(run.since(run).mean()));
+  EXPECT_EQ(run.since(run).started(), 0u);
+}
+
 TEST(InnovationStatsTest, EmptyReportsNull) {
   const InnovationStats stats;
   EXPECT_TRUE(std::isnan(stats.mean()));
