@@ -205,7 +205,7 @@ class Outputs(unittest.TestCase):
                 self.assertTrue(rows[0].startswith("t,scan,pose_error_m,"))
                 self.assertEqual(rows[-1], "")
                 self.assertGreater(len(rows), 2)
-                self.assertTrue(all(len(r.split(",")) == 11 for r in rows[1:-1]))
+                self.assertTrue(all(len(r.split(",")) == 13 for r in rows[1:-1]))
 
     def test_interrupted_sweep_summarises_the_seeds_so_far(self):
         with tempfile.TemporaryDirectory() as out:
