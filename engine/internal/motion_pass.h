@@ -3,7 +3,8 @@
 // the thread's lane columns, padded to whole groups of kMotionLanes, carried through every
 // control by the vectorised kernels of engine/motion_batch.h (1.0: sample_block with the keyed
 // motion normals, taken from the ahead window where it holds them; 2.0: predict_block), and
-// copied back. With a trajectory buffer it also writes x, y, cos, sin per control and particle.
+// copied back. When the trajectory is recorded it adds the block's weighted sums after every
+// control (TrajectorySums::add).
 // Thread safety: concurrent calls on disjoint blocks with distinct scratch are safe. Costs:
 // O(count K) for K queued controls; no allocation once the scratch has grown.
 #pragma once
@@ -17,6 +18,7 @@
 #include "engine/internal/motion_normals_ahead.h"
 #include "engine/internal/pose_covariance.h"
 #include "engine/internal/scan_plan.h"
+#include "engine/internal/trajectory_recorder.h"
 #include "engine/motion_batch.h"
 #include "memory/particle_store.h"
 #include "parallel/random_stream.h"
@@ -27,6 +29,7 @@ namespace fastslam::engine::internal {
 // The motion stage's per-thread buffers.
 struct MotionScratch {
   std::vector<double> columns;
+  std::vector<double> weights;  // the block's lanes' weights while recording the trajectory
   std::vector<ControlStep> steps;
   std::vector<std::uint64_t> keys;
 };
@@ -62,26 +65,14 @@ inline void draw_motion_normals(const MotionInput& in, std::span<const std::uint
   }
 }
 
-// x, y, cos, sin of lanes [0, count) after control k, at recorded[(k m + begin + l) * 4].
-template <int N>
-void record_poses(const StateBlock<N>& block, std::size_t k, std::size_t m, std::size_t begin,
-                  std::size_t count, double* recorded) {
-  for (std::size_t l = 0; l < count; ++l) {
-    double* out = &recorded[(k * m + begin + l) * 4];
-    out[0] = block.col[0][l];
-    out[1] = block.col[1][l];
-    parallel::sincos(block.col[2][l], out[2], out[3]);
-  }
-}
-
 }  // namespace motion_pass_detail
 
 // Applies in.pending to particles [begin, begin + count) of `store` (and, for 2.0, their
-// covariances). `recorded` is null unless the trajectory is recorded (m * 4 doubles a control).
+// covariances). `record` is null unless the trajectory is recorded.
 template <class Motion, bool kFs2>
 void advance_block(const Motion& motion, const MotionInput& in, memory::ParticleStore& store,
                    PoseCovariances& covariances, std::size_t begin, std::size_t count,
-                   double* recorded, MotionScratch& scratch) {
+                   const TrajectorySums* record, MotionScratch& scratch) {
   using motion_pass_detail::kStepBatch;
   constexpr int N = Motion::kStateDim;
   constexpr int E = kCovEntries<N>;
@@ -115,9 +106,12 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
     covariances.load_upper<N>(begin, count, cov.data());
     for (int e = 0; e < E; ++e) std::fill(cov[e] + count, cov[e] + lanes, 0.0);
   }
-  const std::size_t m = store.size();
+  if (record != nullptr) {
+    scratch.weights.resize(lanes);
+    record->weights(begin, lanes, scratch.weights.data());
+  }
   // Recording the trajectory needs the poses after every step; otherwise one call runs a batch.
-  const std::size_t per_call = recorded != nullptr ? 1 : kStepBatch;
+  const std::size_t per_call = record != nullptr ? 1 : kStepBatch;
   for (std::size_t first = 0; first < k_steps; first += kStepBatch) {
     const std::size_t batch = std::min(kStepBatch, k_steps - first);
     if constexpr (!kFs2) {
@@ -134,8 +128,10 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
       } else {
         sample_block(motion, block, run, sigmas, column(N + 2 * j));
       }
-      if (recorded != nullptr)
-        motion_pass_detail::record_poses(block, k, m, begin, count, recorded);
+      if (record != nullptr) {
+        record->add(k, begin, lanes, block.col[0], block.col[1], block.col[2],
+                    scratch.weights.data());
+      }
     }
   }
   for (int k = 0; k < N; ++k) std::copy_n(block.col[k], count, store_col[k] + begin);

@@ -125,7 +125,7 @@ class ParticlePass final : public Pass {
         1);
     heavy_ = std::accumulate(block_seconds_.begin(), block_seconds_.end(), 0.0) >
              s_.config.split_seconds;
-    if (in.record) recorder_.finish(kernel_, queued, s_.counters.controls - queued);
+    if (in.record) recorder_.finish(queued, s_.counters.controls - queued);
     s_.pending.clear();
   }
 
@@ -134,7 +134,7 @@ class ParticlePass final : public Pass {
     const Clock::time_point t0 = Clock::now();
     if (!in.motion.pending.empty()) {
       advance_block<Motion, kFs2>(motion_, in.motion, s_.store, s_.covariances, begin, end - begin,
-                                  in.record ? recorder_.buffer() : nullptr, scratch.motion);
+                                  in.record ? &recorder_.sums() : nullptr, scratch.motion);
     }
     const Clock::time_point t1 = Clock::now();
     double associate_seconds = 0.0;

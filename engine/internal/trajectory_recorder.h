@@ -1,15 +1,16 @@
 // Trajectory recording (FilterConfig::record_trajectory): the weighted-mean pose after every
-// control. A pass that runs queued controls first `begin`s (the weights are snapshot as
-// l_i - max l, since the controls do not change them, and exponentiated in finish's parallel
-// blocks), lets the motion stage write x, y, cos, sin per control and particle into `buffer()`,
-// then `finish`es: the weighted means, per control, over fixed blocks (every control's in one
-// parallel call) folded in order as ParticleKernel::reduce folds, so bit-identical for any
-// thread count. A rank of a shared particle set (parallel/collective.h) takes the largest
-// log-weight of the set and folds every rank's blocks, so every rank records the points one
-// process would. Owns the buffer and the points not yet taken; borrows the group.
-// Thread safety: thread-compatible; the motion stage writes disjoint parts of the buffer
-// concurrently. Costs: begin O(M), finish O(M K) for K controls; the buffer (4 M K doubles) is
-// reused.
+// control. A pass that runs queued controls first `begin`s (the largest log-weight of the set,
+// since the controls do not change the weights), then the motion stage adds, after every
+// control, the weighted sums of each group of kMotionLanes lanes (TrajectorySums::add: w, w x,
+// w y, w cos, w sin, each group summed in one fixed order), and `finish` folds the groups in
+// order, control by control. Pass blocks hold whole groups, so the points are bit-identical for
+// any block split and thread count; a rank of a shared particle set (parallel/collective.h)
+// holds whole groups too, takes the set's largest log-weight and folds every rank's groups in
+// rank order, so every rank records the points one process would. Owns the group sums and the
+// points not yet taken; borrows the group.
+// Thread safety: thread-compatible; the motion stage adds disjoint groups concurrently. Costs:
+// per control and lane a sincos and five multiply-adds in the motion stage; finish O(M K / 8)
+// for K controls; the sums (5 M K / 8 doubles) are reused.
 #pragma once
 
 #include <cstddef>
@@ -19,22 +20,42 @@
 
 #include "engine/filter.h"
 #include "parallel/collective.h"
-#include "parallel/particle_kernel.h"
 
 namespace fastslam::engine::internal {
+
+// The motion stage's view of a recording pass. Lane group g is local particles
+// [8 g, 8 g + 8); a group past the last particle's is padding with weight 0.
+struct TrajectorySums {
+  static constexpr std::size_t kTerms = 5;  // w, w x, w y, w cos(theta), w sin(theta)
+  static constexpr std::size_t kGroup = 8;  // kMotionLanes (engine/motion_batch.h)
+
+  std::span<const double> log_weight;  // the local particles'
+  double shift = 0.0;                  // the set's largest log-weight: w = exp(l - shift)
+  std::size_t groups = 0;              // lane groups of the local particles
+  double* sums = nullptr;              // control k, group g, term t at [(k groups + g) kTerms + t]
+
+  // The weights of lanes [begin, begin + lanes) to w (0 past the last particle).
+  // REQUIRES: begin % kGroup == 0, lanes % kGroup == 0.
+  void weights(std::size_t begin, std::size_t lanes, double* w) const;
+  // The sums of the groups of lanes [begin, begin + lanes) after control k, from the lanes'
+  // x, y, theta (|theta| <= parallel::kSinCosMaxArg) and weights w (all lane-indexed from 0).
+  // REQUIRES: as weights().
+  void add(std::size_t k, std::size_t begin, std::size_t lanes, const double* x, const double* y,
+           const double* theta, const double* w) const;
+};
 
 class TrajectoryRecorder {
  public:
   // `group`: the ranks sharing the particle set (nullptr: this process holds all of it).
   explicit TrajectoryRecorder(parallel::Collective* group = nullptr) : group_(group) {}
 
-  // Prepares for `controls` controls over the particles with log-weights `log_weight`.
+  // Prepares for `controls` controls over the local particles with log-weights `log_weight`
+  // (read by the motion stage: unchanged until each block's motion is done).
   void begin(std::span<const double> log_weight, std::size_t controls);
-  // x, y, cos theta, sin theta of particle i after control k at [(k M + i) * 4].
-  double* buffer() { return recorded_.data(); }
+  // Where the motion stage adds its groups' sums (valid until the next begin).
+  const TrajectorySums& sums() const { return view_; }
   // Appends one point per control; the first is control number `first_control`.
-  void finish(const parallel::ParticleKernel& kernel, std::size_t controls,
-              std::uint64_t first_control);
+  void finish(std::size_t controls, std::uint64_t first_control);
 
   // The points recorded and not taken yet (saved with the state).
   std::vector<TrajectoryPoint>& points() { return points_; }
@@ -42,8 +63,8 @@ class TrajectoryRecorder {
 
  private:
   parallel::Collective* group_;
-  std::vector<double> recorded_;
-  std::vector<double> weights_;
+  std::vector<double> sums_;
+  TrajectorySums view_;
   std::vector<TrajectoryPoint> points_;
 };
 

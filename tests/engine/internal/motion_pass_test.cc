@@ -2,9 +2,10 @@
 // keyed streams: FastSLAM 1.0 samples each control with the particle's (seed, step, particle,
 // kMotion) normals, 2.0 propagates mean and covariance (P <- J P J^T + V M V^T). Also: the
 // result does not depend on the block split or on normals taken from the ahead window, and the
-// recorded poses are the states after each control.
+// recorded trajectory is the weighted mean of the states after each control.
 #include "engine/internal/motion_pass.h"
 
+#include <array>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -48,7 +49,7 @@ struct Fixture {
 
 template <class Motion, bool kFs2>
 void advance(const Motion& motion, Fixture& f, std::vector<std::size_t> cuts,
-             const MotionNormalsWindow& window, double* recorded) {
+             const MotionNormalsWindow& window, const TrajectorySums* record) {
   MotionInput in;
   in.pending = f.pending;
   in.seed = kSeed;
@@ -57,8 +58,8 @@ void advance(const Motion& motion, Fixture& f, std::vector<std::size_t> cuts,
   in.ahead = &window;
   MotionScratch scratch;
   for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
-    advance_block<Motion, kFs2>(motion, in, f.store, f.cov, cuts[c], cuts[c + 1] - cuts[c],
-                                recorded, scratch);
+    advance_block<Motion, kFs2>(motion, in, f.store, f.cov, cuts[c], cuts[c + 1] - cuts[c], record,
+                                scratch);
   }
 }
 
@@ -76,10 +77,17 @@ void expect_sampling_matches_scalar(const Motion& motion) {
   constexpr std::size_t m = 37;
   Fixture f(m, 5, Motion::kNoOdometry, 1);
   Fixture start(m, 5, Motion::kNoOdometry, 1);
-  std::vector<double> recorded(f.pending.size() * m * 4);
-  advance<Motion, false>(motion, f, {0, 16, 24, m}, MotionNormalsWindow{}, recorded.data());
+  std::vector<double> log_weight(m);
+  for (std::size_t i = 0; i < m; ++i) log_weight[i] = -0.1 * static_cast<double>(i % 7);
+  TrajectoryRecorder recorder;
+  recorder.begin(log_weight, f.pending.size());
+  advance<Motion, false>(motion, f, {0, 16, 24, m}, MotionNormalsWindow{}, &recorder.sums());
+  recorder.finish(f.pending.size(), 0);
   const typename Motion::Control sigmas(0.3, 0.05);
+  // Per control: the sums of w, w x, w y, w cos, w sin over the scalar models' states.
+  std::vector<std::array<double, 5>> mean(f.pending.size(), std::array<double, 5>{});
   for (std::size_t i = 0; i < m; ++i) {
+    const double w = std::exp(log_weight[i]);
     typename Motion::State s = state_of<Motion>(start, i);
     for (std::size_t k = 0; k < f.pending.size(); ++k) {
       const PendingControl& c = f.pending[k];
@@ -88,13 +96,20 @@ void expect_sampling_matches_scalar(const Motion& motion) {
                                            static_cast<std::uint32_t>(i), 1, {&n[0], 1},
                                            {&n[1], 1});
       s = motion.sample(s, typename Motion::Control(c.u0, c.u1), c.dt, sigmas, n);
-      const double* r = &recorded[(k * m + i) * 4];
-      EXPECT_NEAR(r[0], s[0], 1e-9);
-      EXPECT_NEAR(r[2], std::cos(s[2]), 1e-9);
-      EXPECT_NEAR(r[3], std::sin(s[2]), 1e-9);
+      const std::array<double, 5> terms = {w, w * s[0], w * s[1], w * std::cos(s[2]),
+                                           w * std::sin(s[2])};
+      for (int t = 0; t < 5; ++t) mean[k][t] += terms[t];
     }
     const typename Motion::State got = state_of<Motion>(f, i);
     for (int k = 0; k < Motion::kStateDim; ++k) EXPECT_NEAR(got[k], s[k], 1e-9) << i << " " << k;
+  }
+  const std::vector<TrajectoryPoint>& points = recorder.points();
+  ASSERT_EQ(points.size(), f.pending.size());
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    EXPECT_EQ(points[k].control, k);
+    EXPECT_NEAR(points[k].x, mean[k][1] / mean[k][0], 1e-9);
+    EXPECT_NEAR(points[k].y, mean[k][2] / mean[k][0], 1e-9);
+    EXPECT_NEAR(points[k].theta, std::atan2(mean[k][4], mean[k][3]), 1e-9);
   }
 }
 
