@@ -15,10 +15,16 @@ constexpr std::size_t kG = TrajectorySums::kGroup;
 constexpr std::size_t kT = TrajectorySums::kTerms;
 
 // One fixed order for a group's eight terms, ((p0 + p4) + (p2 + p6)) + ((p1 + p5) + (p3 + p7)):
-// the first step is one vector add, and no compiler may reorder it.
+// the first step as one four-wide add (GCC's vector extension, so that it is not left scalar).
+// The file compiles without contraction (engine/CMakeLists.txt): each product is rounded before
+// the adds, so the bits are the same on every target and in any vectorisation.
+using Four = double __attribute__((vector_size(32)));
 [[gnu::always_inline]] inline double group_total(const double* p) {
-  double q[4];
-  for (std::size_t j = 0; j < 4; ++j) q[j] = p[j] + p[j + 4];
+  Four lo;
+  Four hi;
+  std::memcpy(&lo, p, sizeof(Four));
+  std::memcpy(&hi, p + 4, sizeof(Four));
+  const Four q = lo + hi;
   return (q[0] + q[2]) + (q[1] + q[3]);
 }
 
