@@ -17,6 +17,10 @@ Peers:
                      ../shared/data/bailey_sim). FasterSLAM sets its resampling threshold to
                      0.75 x 100 particles when it starts, before it reads M, so at M = 1000 it
                      resamples far less often than a filter with a threshold that scales with M.
+                     Its optimised prediction (fastslam1/predict_update.cpp) perturbs each
+                     control with fill_rand's uniform draws on [-1, 1] through the Cholesky
+                     factor of the control noise, not with normal draws: a cheaper step, and
+                     noise of 1/sqrt(3) the model's standard deviation.
 
     /usr/bin/python3 bench/compare/peers.py --build build/release --shared ../shared \\
         --fasterslam /path/to/FasterSLAM/src --particles 100,1000 --threads 1,2 --rounds 5

@@ -1,22 +1,82 @@
 #include "tools/cli/run_recorder.h"
 
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
+#include <deque>
+#include <functional>
+#include <future>
+#include <mutex>
 #include <stdexcept>
 #include <string_view>
+#include <system_error>
+#include <thread>
 #include <utility>
 
 #include "tools/io/number_text.h"
 
 namespace fastslam::tools {
 
-// One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, written to its
-// temporary as it comes and put in place by close().
+// The thread that writes the files: the tasks run one at a time in the order given, so each
+// file's batches stay in order. Destroyed after the files (each waits for its last task).
+class RunRecorder::Writer {
+ public:
+  Writer() : thread_([this] { loop(); }) {}
+  ~Writer() {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    ready_.notify_one();
+    thread_.join();
+  }
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
+
+  std::future<void> run(std::function<void()> task) {
+    std::packaged_task<void()> job(std::move(task));
+    std::future<void> done = job.get_future();
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      queue_.push_back(std::move(job));
+    }
+    ready_.notify_one();
+    return done;
+  }
+
+ private:
+  void loop() {
+    for (;;) {
+      std::packaged_task<void()> job;
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        ready_.wait(lock, [&] { return stop_ || !queue_.empty(); });
+        if (queue_.empty()) return;  // stopped, and every task has run
+        job = std::move(queue_.front());
+        queue_.pop_front();
+      }
+      job();  // its exception goes to its future
+    }
+  }
+
+  std::mutex mutex_;
+  std::condition_variable ready_;
+  std::deque<std::packaged_task<void()>> queue_;
+  bool stop_ = false;
+  std::thread thread_;  // last: started once the rest is built
+};
+
+// One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, put in place by
+// close(). The poses are queued; every kBatch of them a background task formats and writes them
+// to the temporary while the run goes on (one task at a time per file, so the lines keep their
+// order and the formatting buffers have one user), and close() writes the rest and commits.
+// Without a writer (no thread to be had) each task runs in the caller.
 class RunRecorder::PoseFile {
  public:
   enum class Format { kCsv, kCsvPosition, kTum };
 
-  PoseFile(const std::string& path, Format format) : format_(format), file_(path) {
+  PoseFile(const std::string& path, Format format, Writer* writer)
+      : format_(format), file_(path), writer_(writer) {
     switch (format_) {
       case Format::kCsv:
         file_.write("t,x,y,theta\n");
@@ -28,29 +88,77 @@ class RunRecorder::PoseFile {
         file_.write(kTumHeader);
         break;
     }
+    pending_.reserve(kBatch);
+  }
+  // A task still writing uses this file: wait for it (its error, if any, is dropped with it).
+  ~PoseFile() {
+    if (job_.valid()) job_.wait();
+  }
+  PoseFile(const PoseFile&) = delete;
+  PoseFile& operator=(const PoseFile&) = delete;
+
+  // Throws std::runtime_error naming the file once a write has failed (reported when the next
+  // batch is handed over, or by close()).
+  void add(const StampedPose& p) {
+    pending_.push_back(p);
+    if (pending_.size() >= kBatch) hand_over(false);
   }
 
-  // Throws std::runtime_error naming the file once a write has failed.
-  void add(const StampedPose& p) {
-    if (format_ == Format::kTum) {
-      line_.clear();
-      append_tum(line_, p);
-      file_.write(line_);
+  // Writes what is queued and puts the file in place in the background; close() waits for it.
+  void start_close() { hand_over(true); }
+  // Throws as add() and as AtomicFile::commit().
+  void close() {
+    if (!closing_) start_close();
+    wait();
+  }
+
+ private:
+  static constexpr std::size_t kBatch = 1024;  // a full disk ends the run within two batches
+
+  void wait() {
+    if (job_.valid()) job_.get();  // rethrows the task's error
+  }
+
+  void hand_over(bool commit) {
+    wait();
+    closing_ = commit;
+    auto task = [this, batch = std::move(pending_), commit] {
+      write(batch);
+      if (commit) file_.commit();
+    };
+    pending_ = {};
+    pending_.reserve(commit ? 0 : kBatch);
+    if (writer_ != nullptr) {
+      job_ = writer_->run(std::move(task));
     } else {
-      text_.clear();
-      text_.fixed(p.time, 3).put(',').fixed(p.x, 6).put(',').fixed(p.y, 6);
-      if (format_ == Format::kCsv) text_.put(',').fixed(p.theta, 6);
-      file_.write(text_.put('\n').view());
+      task();
     }
   }
 
-  void close() { file_.commit(); }
+  void write(const std::vector<StampedPose>& batch) {
+    chunk_.clear();
+    for (const StampedPose& p : batch) {
+      if (format_ == Format::kTum) {
+        append_tum(chunk_, p);
+      } else {
+        text_.clear();
+        text_.fixed(p.time, 3).put(',').fixed(p.x, 6).put(',').fixed(p.y, 6);
+        if (format_ == Format::kCsv) text_.put(',').fixed(p.theta, 6);
+        chunk_.append(text_.put('\n').view());
+      }
+    }
+    file_.write(chunk_);
+  }
 
- private:
   Format format_;
   AtomicFile file_;
-  std::string line_;
+  Writer* writer_;
+  std::vector<StampedPose> pending_;
+  bool closing_ = false;
+  // Used by the task only.
+  std::string chunk_;
   TextLine text_;
+  std::future<void> job_;  // last: waited for before the rest goes
 };
 
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
@@ -64,8 +172,15 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
       dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}, "dead reckoning's GPS error") {
   if (!out_dir_.empty()) {
     using F = PoseFile::Format;
-    trajectory_csv_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv);
-    trajectory_tum_ = std::make_unique<PoseFile>(out_dir_ + "/trajectory.tum", F::kTum);
+    try {
+      writer_ = std::make_unique<Writer>();
+    } catch (const std::system_error&) {
+      // No thread to be had: the files are written by the run's own thread.
+    }
+    trajectory_csv_ =
+        std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv, writer_.get());
+    trajectory_tum_ =
+        std::make_unique<PoseFile>(out_dir_ + "/trajectory.tum", F::kTum, writer_.get());
   }
   // The start pose is scored (it is the estimate before the first control) but not written:
   // the files hold the poses after the controls.
@@ -101,9 +216,9 @@ void RunRecorder::Scored::reference(const StampedPose& p) {
 RunRecorder::PoseFile& RunRecorder::file(std::unique_ptr<PoseFile>& slot, const char* name,
                                          bool position_only) {
   if (!slot) {
-    slot = std::make_unique<PoseFile>(out_dir_ + "/" + name, position_only
-                                                                 ? PoseFile::Format::kCsvPosition
-                                                                 : PoseFile::Format::kCsv);
+    slot = std::make_unique<PoseFile>(
+        out_dir_ + "/" + name,
+        position_only ? PoseFile::Format::kCsvPosition : PoseFile::Format::kCsv, writer_.get());
   }
   return *slot;
 }
@@ -156,7 +271,17 @@ void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
 
 RecordedRun RunRecorder::finish() {
   RecordedRun r;
-  // Each file on its own: one that failed leaves the others whole.
+  // Each file on its own: one that failed leaves the others whole. The writer commits them
+  // while the run's thread waits for the first.
+  for (std::unique_ptr<PoseFile>* f :
+       {&trajectory_csv_, &trajectory_tum_, &truth_csv_, &gps_csv_, &dr_csv_}) {
+    if (!*f) continue;
+    try {
+      (*f)->start_close();
+    } catch (const std::exception&) {
+      // The error of an earlier batch: close() below reports it.
+    }
+  }
   auto close = [&](std::unique_ptr<PoseFile>& f, const char* name) {
     if (!f) return;
     try {

@@ -6,9 +6,13 @@
 // streaming trajectory evaluation (tools/eval/trajectory_metrics.h) against the truth and
 // against GPS.
 //
-// Ownership: owns its files and evaluators. Thread safety: thread-compatible.
-// Costs: O(1) per control, truth pose or fix plus a buffered file write; memory O(controls
-// between two estimate batches).
+// The files' text is formatted and written by one background thread, a batch of poses at a time,
+// so the run's thread only queues the poses.
+//
+// Ownership: owns its files, their writer thread and the evaluators. Thread safety:
+// thread-compatible (the writer touches only what the files hand it). Costs: O(1) per control,
+// truth pose or fix, the text and the write on the writer; memory O(controls between two
+// estimate batches) plus two batches of poses per file.
 #pragma once
 
 #include <cstdint>
@@ -67,6 +71,7 @@ class RunRecorder {
   RecordedRun finish();
 
  private:
+  class Writer;
   class PoseFile;
 
   PoseFile& file(std::unique_ptr<PoseFile>& slot, const char* name, bool position_only);
@@ -88,6 +93,7 @@ class RunRecorder {
   Scored filter_truth_, filter_gps_, dr_truth_, dr_gps_;
   std::deque<double> control_times_;  // of controls not yet in an estimate batch
   std::uint64_t first_pending_control_ = 0;
+  std::unique_ptr<Writer> writer_;  // before the files: it outlives their tasks
   std::unique_ptr<PoseFile> trajectory_csv_, trajectory_tum_, truth_csv_, gps_csv_, dr_csv_;
   std::optional<StampedPose> last_truth_;
   std::uint64_t truth_poses_ = 0, gps_fixes_ = 0;
