@@ -38,10 +38,9 @@ constexpr double kCarriedCovarianceBytes = 200;
 // unknown association also the spatial index's nodes (664 B counted, --association ml).
 constexpr double kOwnedNodeBytesKnown = 320;
 constexpr double kOwnedNodeBytesUnknown = 800;
-// The trajectory buffer: x, y, cos, sin per particle per control queued before a scan
-// (engine/internal/trajectory_recorder.h). Measured: --scan-period 0.5 and 2 (20 and 80 controls
-// a scan) peak at 1140 and 3092 MB with 10^6 particles, 32.5 B per control.
-constexpr double kTrajectoryBytesPerControl = 32;
+// The trajectory's group sums: five doubles per group of eight particles per control queued
+// before a scan (engine/internal/trajectory_recorder.h), 5 B per particle and control.
+constexpr double kTrajectoryBytesPerControl = 5;
 // The scan records: an assignment and a distance per particle and detection
 // (engine/internal/scan_report.h).
 constexpr double kRecordBytesPerDetection = 16;

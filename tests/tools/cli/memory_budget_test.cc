@@ -90,22 +90,22 @@ TEST(MemoryEstimate, SumsThePerParticleAndThePerMapTerms) {
   EXPECT_EQ(one.bytes, 1000 * one.per_particle + one.map_bytes);
   EXPECT_FALSE(one.lower_bound);
   EXPECT_EQ(one.landmarks, 1000u);
-  // 290 own + 320 leaf + 40 controls x 32 + 300 detections x (16 + 130).
-  EXPECT_EQ(one.per_particle, 290u + 320u + 40u * 32u + 300u * 146u);
+  // 290 own + 320 leaf + 40 controls x 5 + 300 detections x (16 + 130).
+  EXPECT_EQ(one.per_particle, 290u + 320u + 40u * 5u + 300u * 146u);
   EXPECT_EQ(one.map_bytes, 1000u * 180u);
 
   // Each control queued before a scan adds a trajectory row; each detection records and copies.
   EXPECT_EQ(
       estimate_filter_memory(filter(1, Algorithm::kFastSlam1), source(1000, 41, 300)).per_particle -
           one.per_particle,
-      32u);
+      5u);
   EXPECT_EQ(
       estimate_filter_memory(filter(1, Algorithm::kFastSlam1), source(1000, 40, 301)).per_particle -
           one.per_particle,
       146u);
   engine::FilterConfig untraced = filter(1, Algorithm::kFastSlam1);
   untraced.record_trajectory = false;
-  EXPECT_EQ(one.per_particle - estimate_filter_memory(untraced, info).per_particle, 40u * 32u);
+  EXPECT_EQ(one.per_particle - estimate_filter_memory(untraced, info).per_particle, 40u * 5u);
 
   // FastSLAM 2.0's covariance column and dearer copies, and its second column without odometry.
   const MemoryEstimate fs2 = estimate_filter_memory(filter(1, Algorithm::kFastSlam2), info);
@@ -128,7 +128,7 @@ TEST(MemoryEstimate, IsALowerBoundWhenTheSourceCannotSay) {
   pipe.scans.known = false;  // a pipe's first scans
   EXPECT_TRUE(estimate_filter_memory(c, pipe).lower_bound);
   // Unknown scans still count one control each.
-  EXPECT_EQ(estimate_filter_memory(c, SourceInfo{}).per_particle, 290u + 320u + 32u);
+  EXPECT_EQ(estimate_filter_memory(c, SourceInfo{}).per_particle, 290u + 320u + 5u);
 }
 
 TEST(MemoryEstimate, TheEkfNeedsItsDenseCovariance) {
