@@ -22,7 +22,6 @@
 #include "engine/motion_batch.h"
 #include "memory/particle_store.h"
 #include "parallel/random_stream.h"
-#include "parallel/vector_math.h"
 
 namespace fastslam::engine::internal {
 
