@@ -24,6 +24,11 @@
 // exactly and kept (within the gate and above ln p0), per observation;
 // tools/scripts/callgrind_kernels.sh counts its instructions (association_kernel, not inlined)
 // against the floor (landmark_ekf_benchmark.cc).
+//
+// BM_AssociationKernelInRange/K: the same kernel where K = 10, 100, 1000 landmarks lie in the
+// sensor's range (30 m, +-90 degrees), each seen about ten times, 8 of them observed with the
+// sensor's noise: the map's density a user's sensor sees, where the discs hold a few landmarks
+// and most are dropped by their own reach and the Mahalanobis bound.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -66,13 +71,9 @@ namespace bench {
 
 namespace {
 
-// The kernel's world: a particle at the origin heading along x, 8 observations of landmarks at
-// 6 .. 27 m within +-60 degrees, each landmark with `in_disc` - 1 others spread uniformly over
-// its observation's search disc (each with the covariance a first sighting from there gives,
-// so that its own reach covers the disc too), and a background grid of 10^4 landmarks 10 m
-// apart (none within two disc radii of an observed landmark). The filter's default noises,
-// gate, search scale and p0.
-struct KernelWorld {
+// What both kernel worlds share: one particle at the origin heading along x, its map and index,
+// the filter's default noises, gate, search scale and p0, and a scan of 8 observations.
+struct KernelMap {
   static constexpr std::size_t kObservations = 8;
   memory::PoolHeap heap;
   memory::LandmarkTree map{heap};
@@ -81,9 +82,10 @@ struct KernelWorld {
   internal::SearchInput in;
   PoseGaussian<3> prior;
   std::vector<internal::PlannedObservation> scan;
-  double in_disc = 0.0;  // landmarks inside the discs, per observation (brute force)
+  std::mt19937_64 rng{7};
+  std::uniform_real_distribution<double> unit{0.0, 1.0};
 
-  explicit KernelWorld(std::size_t per_disc) {
+  KernelMap() {
     const FilterConfig config;
     in.sensor = &sensor;
     in.r << config.sensor.sigma_range * config.sensor.sigma_range, 0.0, 0.0,
@@ -92,9 +94,56 @@ struct KernelWorld {
     in.search_scale = config.gating.search_scale;
     in.log_p0 = config.log_new_landmark;
     prior.mean.setZero();
+  }
+  double radius_of(std::size_t j) const {
+    return std::sqrt(in.search_scale * in.search_scale * in.gate *
+                     (in.variance_bound + internal::measurement_variance(in.r, scan[j].z[0])));
+  }
+  void add(const LandmarkGaussian& g) {
+    memory::Landmark l;
+    store_gaussian(g, l);
+    l.log_odds = 1.0;
+    l.id = map.size();
+    const memory::Slot slot = map.insert(l);
+    index.insert(slot, l.x, l.y, internal::largest_variance(l));
+  }
+  // A grid of 10^4 landmarks 10 m apart with covariance `cov`, none within `clear` of the origin
+  // or within two disc radii of `observed` (so the index has the depth of a large map).
+  void background(const Eigen::Matrix2d& cov, double clear,
+                  const std::vector<LandmarkGaussian>& observed) {
+    for (int gx = -50; gx < 50; ++gx) {
+      for (int gy = -50; gy < 50; ++gy) {
+        LandmarkGaussian g;
+        g.cov = cov;
+        g.mean = {10.0 * gx + 5.0 * unit(rng), 10.0 * gy + 5.0 * unit(rng)};
+        bool free = g.mean.norm() > clear;
+        for (std::size_t j = 0; j < observed.size(); ++j) {
+          free = free && (g.mean - observed[j].mean).norm() > 2.0 * radius_of(j);
+        }
+        if (free) add(g);
+      }
+    }
+  }
+  // Landmarks inside the observations' search discs, per observation (brute force).
+  double in_disc() const {
     const Pose pose = prior.mean;
-    std::mt19937_64 rng(7);
-    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::size_t inside = 0;
+    for (std::size_t j = 0; j < scan.size(); ++j) {
+      const Eigen::Vector2d at = sensor.landmark_from(scan[j].z, pose);
+      const double r = radius_of(j);
+      for (const auto [slot, l] : map) inside += (Eigen::Vector2d(l.x, l.y) - at).norm() <= r;
+    }
+    return static_cast<double>(inside) / static_cast<double>(scan.size());
+  }
+};
+
+// The dense world (BM_AssociationKernel): 8 observations of landmarks at 6 .. 27 m within +-60
+// degrees, each landmark with `per_disc` - 1 others spread uniformly over its observation's
+// search disc (each with the covariance a first sighting from there gives, so that its own
+// reach covers the disc too), and the background grid.
+struct KernelWorld : KernelMap {
+  explicit KernelWorld(std::size_t per_disc) {
+    const Pose pose = prior.mean;
     std::vector<LandmarkGaussian> observed;
     for (std::size_t j = 0; j < kObservations; ++j) {
       const double range = 6.0 + 3.0 * static_cast<double>(j);
@@ -105,19 +154,6 @@ struct KernelWorld {
       observed.push_back(initialize_landmark(sensor, pose, o.z, in.r));
       in.variance_bound = std::max(in.variance_bound, internal::measurement_variance(in.r, range));
     }
-    const double scale2 = in.search_scale * in.search_scale;
-    auto radius_of = [&](std::size_t j) {
-      return std::sqrt(scale2 * in.gate *
-                       (in.variance_bound + internal::measurement_variance(in.r, scan[j].z[0])));
-    };
-    auto add = [&](const LandmarkGaussian& g) {
-      memory::Landmark l;
-      store_gaussian(g, l);
-      l.log_odds = 1.0;
-      l.id = map.size();
-      const memory::Slot slot = map.insert(l);
-      index.insert(slot, l.x, l.y, internal::largest_variance(l));
-    };
     for (std::size_t j = 0; j < kObservations; ++j) {
       add(observed[j]);
       const double r = radius_of(j);
@@ -129,34 +165,47 @@ struct KernelWorld {
         add(g);
       }
     }
-    for (int gx = -50; gx < 50; ++gx) {
-      for (int gy = -50; gy < 50; ++gy) {
-        LandmarkGaussian g = observed[0];
-        g.mean = {10.0 * gx + 5.0 * unit(rng), 10.0 * gy + 5.0 * unit(rng)};
-        bool clear = true;
-        for (std::size_t j = 0; j < kObservations; ++j) {
-          clear = clear && (g.mean - observed[j].mean).norm() > 2.0 * radius_of(j);
-        }
-        if (clear) add(g);
-      }
-    }
-    std::size_t inside = 0;
-    for (std::size_t j = 0; j < kObservations; ++j) {
-      const double r = radius_of(j);
-      for (const auto [slot, l] : map) {
-        inside += (Eigen::Vector2d(l.x, l.y) - observed[j].mean).norm() <= r ? 1 : 0;
-      }
-    }
-    in_disc = static_cast<double>(inside) / static_cast<double>(kObservations);
+    background(observed[0].cov, 0.0, observed);
   }
 };
 
-void BM_AssociationKernel(benchmark::State& state) {
-  const KernelWorld w(static_cast<std::size_t>(state.range(0)));
+// The sensor's view (BM_AssociationKernelInRange): `in_range` landmarks spread uniformly over
+// the field of view (range 1 .. 30 m, +-90 degrees), each with a tenth of the covariance its
+// first sighting from the origin gives (a landmark seen about ten times), 8 of them observed
+// with the sensor's noise, and the background grid beyond 40 m. The search's variance bound is
+// the filter's after scans out to 30 m.
+struct InRangeWorld : KernelMap {
+  explicit InRangeWorld(std::size_t in_range) {
+    const Pose pose = prior.mean;
+    constexpr double kMaxRange = 30.0;
+    in.variance_bound = internal::measurement_variance(in.r, kMaxRange);
+    std::normal_distribution<double> normal;
+    std::vector<LandmarkGaussian> observed;
+    for (std::size_t k = 0; k < in_range; ++k) {
+      const double range = std::max(1.0, kMaxRange * std::sqrt(unit(rng)));
+      const double bearing = (unit(rng) - 0.5) * std::numbers::pi;
+      LandmarkGaussian g = initialize_landmark(sensor, pose, Eigen::Vector2d(range, bearing), in.r);
+      g.cov *= 0.1;
+      add(g);
+      if (k < kObservations) {
+        internal::PlannedObservation o;
+        o.z = sensor.predict(g.mean, pose) +
+              Eigen::Vector2d(std::sqrt(in.r(0, 0)) * normal(rng),
+                              std::sqrt(in.r(1, 1)) * normal(rng));
+        scan.push_back(o);
+        observed.push_back(g);
+      }
+    }
+    background(observed[0].cov, kMaxRange + 10.0, {});
+  }
+};
+
+// One call's time, reported per particle-observation (the clock reads add ~1%), with the
+// world's counters.
+void time_kernel(benchmark::State& state, const KernelMap& w) {
   internal::CandidateScratch scratch;
   std::vector<std::int64_t> assignment(w.scan.size());
   const auto observations = static_cast<double>(w.scan.size());
-  // Timed per call, reported per particle-observation (the clock reads add ~1%).
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
     benchmark::DoNotOptimize(
@@ -165,14 +214,30 @@ void BM_AssociationKernel(benchmark::State& state) {
     state.SetIterationTime(std::chrono::duration<double>(t1 - t0).count() / observations);
   }
   state.counters["observations"] = observations;
-  state.counters["in_disc"] = w.in_disc;
+  state.counters["in_disc"] = w.in_disc();
   state.counters["evaluated"] = static_cast<double>(scratch.terms.size()) / observations;
   state.counters["associated"] = static_cast<double>(std::count_if(
       assignment.begin(), assignment.end(), [](std::int64_t a) { return a != kNewLandmark; }));
 }
 
+void BM_AssociationKernel(benchmark::State& state) {
+  time_kernel(state, KernelWorld(static_cast<std::size_t>(state.range(0))));
+}
+
 BENCHMARK(BM_AssociationKernel)
     ->ArgName("in_disc")
+    ->Arg(10)
+    ->Arg(100)
+    ->Arg(1000)
+    ->UseManualTime()
+    ->Unit(benchmark::kNanosecond);
+
+void BM_AssociationKernelInRange(benchmark::State& state) {
+  time_kernel(state, InRangeWorld(static_cast<std::size_t>(state.range(0))));
+}
+
+BENCHMARK(BM_AssociationKernelInRange)
+    ->ArgName("in_range")
     ->Arg(10)
     ->Arg(100)
     ->Arg(1000)

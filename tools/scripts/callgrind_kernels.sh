@@ -4,9 +4,10 @@
 #   1. the bare 2x2 EKF floor (BM_BareEkfFloor's bare_ekf_update, bench/engine/
 #      landmark_ekf_benchmark.cc) and the engine's own landmark update (update_landmark, called
 #      through engine_ekf_update there): Ir per call, libm's atan2 and log included;
-#   2. the association kernel (BM_AssociationKernel's association_kernel, bench/engine/
-#      association_benchmark.cc: one particle's candidate search and ML choice for a scan of 8
-#      observations) with about 10, 100 and 1000 landmarks inside each search disc: Ir per
+#   2. the association kernel (association_kernel, bench/engine/association_benchmark.cc: one
+#      particle's candidate search and ML choice for a scan of 8 observations) with 10, 100 and
+#      1000 landmarks in the sensor's range (BM_AssociationKernelInRange) and with about 10, 100
+#      and 1000 landmarks inside each search disc (BM_AssociationKernel): Ir per
 #      particle-observation and as a multiple of the floor;
 #   3. `fastslam bench scaling` at N landmarks, M particles, FS1 or FS2, ML or known, with
 #      collection switched on only inside Filter::observe (the pass runs the queued controls,
@@ -65,14 +66,21 @@ echo -n "update_landmark (engine_ekf_update): " && per_call "$out/floor.out" 'be
 
 floor=$(per_call "$out/floor.out" 'bench::bare_ekf_update\(' | cut -d' ' -f1)
 echo "== the association kernel (association_kernel, 8 observations a call), Ir per particle-observation"
-for k in 10 100 1000; do
-  valgrind --tool=callgrind --callgrind-out-file="$out/kernel_$k.out" \
-    build/callgrind/bench/engine/association_benchmark \
-    --benchmark_filter="BM_AssociationKernel/in_disc:$k/" --benchmark_min_time=0.02 \
-    >"$out/kernel_$k.log" 2>&1
-  per_call "$out/kernel_$k.out" 'bench::association_kernel\(' | awk -v k="$k" -v f="$floor" \
-    '{ printf "~%s landmarks in the disc: %.0f Ir per particle-observation, %.1fx the floor\n",
-       k, $1 / 8, $1 / 8 / f }'
+for world in in_range in_disc; do
+  case $world in
+    in_range) bm=BM_AssociationKernelInRange; what="landmarks in range" ;;
+    in_disc) bm=BM_AssociationKernel; what="landmarks in the disc" ;;
+  esac
+  for k in 10 100 1000; do
+    valgrind --tool=callgrind --callgrind-out-file="$out/kernel_${world}_$k.out" \
+      build/callgrind/bench/engine/association_benchmark \
+      --benchmark_filter="$bm/$world:$k/" --benchmark_min_time=0.02 \
+      >"$out/kernel_${world}_$k.log" 2>&1
+    per_call "$out/kernel_${world}_$k.out" 'bench::association_kernel\(' |
+      awk -v k="$k" -v f="$floor" -v what="$what" \
+        '{ printf "~%s %s: %.0f Ir per particle-observation, %.1fx the floor\n",
+           k, what, $1 / 8, $1 / 8 / f }'
+  done
 done
 
 echo "== fastslam bench scaling: N = $n, M = $m, $updates updates, $algorithm, $association"
