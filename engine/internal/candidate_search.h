@@ -15,7 +15,10 @@
 // that passes the bounds with an upper bound on its ln p (tag kBoundOnly, lazy_association.h),
 // from the same two bounds (m^2 >= the Mahalanobis bound, det Q >= det R), and
 // `choose_maximum_likelihood` evaluates only those the greedy choice or the scan report needs;
-// most candidates of a dense patch cannot win and are never evaluated.
+// most candidates of a dense patch cannot win and are never evaluated. When no landmark is a
+// candidate of two observations the choice is made per observation (no joint order to keep).
+// The discs' centres take one sine and cosine per particle when the pass gives the scan's
+// bearings (scan_bearings, once per scan for every particle).
 // Thread safety: reads the map and index; concurrent calls with distinct scratch are safe.
 // Costs: O(h + k) index work and O(c) exact gates for k entries reached and c near enough (1.0
 // ML: the c evaluated by the choice); no allocation once the scratch has grown.
@@ -67,7 +70,20 @@ struct SearchInput {
   // landmark" score is at least this (association.h), so the cut below stays safe.
   double log_p0 = 0.0;
   double variance_bound = 0.0;
+  // Observation j's bearing as (cos, sin), the same in every particle (scan_bearings): the
+  // discs' centres then take one sine and cosine per particle, not one per observation. Empty:
+  // each centre from RangeBearingModel::landmark_from.
+  std::span<const Eigen::Vector2d> bearings;
 };
+
+// The scan's bearings as SearchInput::bearings takes them, into `out`.
+inline void scan_bearings(const std::vector<PlannedObservation>& scan,
+                          std::vector<Eigen::Vector2d>& out) {
+  out.resize(scan.size());
+  for (std::size_t j = 0; j < scan.size(); ++j) {
+    out[j] = {std::cos(scan[j].z[1]), std::sin(scan[j].z[1])};
+  }
+}
 
 namespace candidate_search_detail {
 
@@ -102,9 +118,27 @@ std::array<double, 4> plan_discs(const SearchInput& in, const Pose& pose,
   constexpr double kInf = std::numeric_limits<double>::infinity();
   std::array<double, 4> box = {kInf, kInf, -kInf, -kInf};
   scratch.discs.resize(scan.size());
+  // The sensor's heading, rotated by each bearing (angle addition, to rounding the same point
+  // as landmark_from: the disc is a search region, the exact terms never read it).
+  const bool rotate = in.bearings.size() == scan.size();
+  const Eigen::Vector2d origin = sensor.sensor_position(pose);
+  double cos_heading = 1.0;
+  double sin_heading = 0.0;
+  if (rotate) {
+    const double heading = pose[2] + sensor.offset().yaw;
+    cos_heading = std::cos(heading);
+    sin_heading = std::sin(heading);
+  }
   for (std::size_t j = 0; j < scan.size(); ++j) {
     const Eigen::Vector2d& z = scan[j].z;
-    const Eigen::Vector2d at = sensor.landmark_from(z, pose);
+    Eigen::Vector2d at;
+    if (rotate) {
+      const Eigen::Vector2d& b = in.bearings[j];
+      at = origin + z[0] * Eigen::Vector2d(cos_heading * b[0] - sin_heading * b[1],
+                                           sin_heading * b[0] + cos_heading * b[1]);
+    } else {
+      at = sensor.landmark_from(z, pose);
+    }
     double spread = measurement_variance(in.r, z[0]);
     if constexpr (kFs2) {
       const double lever = z[0] + offset;
@@ -235,14 +269,21 @@ double choose(const SearchInput& in, const PoseGaussian<N>& prior, const memory:
     candidates.resize(kept);
     return associate_maximum_likelihood(candidates, log_unassociated, assignment);
   }
+  // When no landmark is a candidate of two observations (the usual case once gated), the
+  // choice is made per observation; the check is quadratic, so long lists go to the joint one.
+  const bool independent = candidates.size() <= 16 && slots_disjoint(candidates);
   if constexpr (std::is_same_v<Unassociated, double>) {
-    return lazy_maximum_likelihood(
-        candidates, [log_unassociated](std::size_t) { return log_unassociated; }, true, assignment,
-        scratch.lazy, evaluate);
+    const auto score = [log_unassociated](std::size_t) { return log_unassociated; };
+    return independent ? independent_maximum_likelihood(candidates, score, true, assignment,
+                                                        scratch.lazy, evaluate)
+                       : lazy_maximum_likelihood(candidates, score, true, assignment, scratch.lazy,
+                                                 evaluate);
   } else {
-    return lazy_maximum_likelihood(
-        candidates, [log_unassociated](std::size_t j) { return log_unassociated[j]; }, false,
-        assignment, scratch.lazy, evaluate);
+    const auto score = [log_unassociated](std::size_t j) { return log_unassociated[j]; };
+    return independent ? independent_maximum_likelihood(candidates, score, false, assignment,
+                                                        scratch.lazy, evaluate)
+                       : lazy_maximum_likelihood(candidates, score, false, assignment, scratch.lazy,
+                                                 evaluate);
   }
 }
 

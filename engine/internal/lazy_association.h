@@ -228,4 +228,97 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
   return log_weight;
 }
 
+// Whether no landmark is a candidate of two observations (then the choice is made per
+// observation). O(C^2) for C candidates: callers ask only for short lists.
+inline bool slots_disjoint(std::span<const AssociationCandidate> candidates) {
+  for (std::size_t a = 0; a < candidates.size(); ++a) {
+    for (std::size_t b = a + 1; b < candidates.size(); ++b) {
+      if (candidates[a].slot == candidates[b].slot &&
+          candidates[a].observation != candidates[b].observation) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+// lazy_maximum_likelihood when no landmark is a candidate of two observations
+// (slots_disjoint): mutual exclusion then never binds, so each observation takes its own best
+// pair, found lazily as there (a bound on top is evaluated; an exact value on top is the best),
+// if it is at or above its "no landmark" score. The same result, weight (the chosen values
+// summed in the greedy order: larger first, ties by observation) and candidates left in the
+// vector; no grouping, no order to keep. REQUIRES: as lazy_maximum_likelihood's, and
+// slots_disjoint(candidates). Costs: O(C) per evaluation within one observation's candidates.
+template <class Unassociated, class Evaluate>
+double independent_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
+                                      const Unassociated& log_unassociated, bool same_for_all,
+                                      std::span<std::int64_t> assignment, LazyScratch& scratch,
+                                      Evaluate&& evaluate) {
+  using lazy_association_detail::before;
+  const std::size_t z = assignment.size();
+  std::fill(assignment.begin(), assignment.end(), kNewLandmark);
+  // By observation (stable), so that each one's candidates are a range.
+  std::vector<std::uint32_t>& start = scratch.start;
+  start.assign(z + 1, 0);
+  for (const AssociationCandidate& c : candidates) ++start[c.observation + 1];
+  for (std::size_t j = 0; j < z; ++j) start[j + 1] += start[j];
+  std::vector<AssociationCandidate>& grouped = scratch.grouped;
+  grouped.resize(candidates.size());
+  std::vector<std::uint32_t>& fill = scratch.front;
+  fill.assign(start.begin(), start.end() - 1);
+  for (const AssociationCandidate& c : candidates) grouped[fill[c.observation]++] = c;
+  std::vector<std::int64_t>& best = scratch.best;
+  best.assign(z, -1);
+  std::vector<std::uint32_t>& order = scratch.order;  // the associated observations
+  order.clear();
+  candidates.clear();
+  for (std::size_t j = 0; j < z; ++j) {
+    for (;;) {
+      std::int64_t top = -1;
+      for (std::uint32_t k = start[j]; k < start[j + 1]; ++k) {
+        if (grouped[k].tag == kDropped) continue;
+        if (top < 0 || before(grouped[k], grouped[static_cast<std::size_t>(top)])) top = k;
+      }
+      if (top < 0) break;
+      AssociationCandidate& c = grouped[static_cast<std::size_t>(top)];
+      if (c.tag != kBoundOnly) {
+        best[j] = top;
+        break;
+      }
+      if (!evaluate(c)) c.tag = kDropped;
+    }
+    if (best[j] >= 0 &&
+        !(grouped[static_cast<std::size_t>(best[j])].log_likelihood < log_unassociated(j))) {
+      const AssociationCandidate& c = grouped[static_cast<std::size_t>(best[j])];
+      assignment[j] = c.slot;
+      order.push_back(static_cast<std::uint32_t>(j));
+      candidates.push_back(c);
+      continue;
+    }
+    // New: every candidate, exact, for the scan report.
+    for (std::uint32_t k = start[j]; k < start[j + 1]; ++k) {
+      AssociationCandidate& c = grouped[k];
+      if (c.tag == kBoundOnly && !evaluate(c)) c.tag = kDropped;
+      if (c.tag < kDropped) candidates.push_back(c);
+    }
+  }
+  // The greedy order of the taken pairs: larger ln p first, ties by observation.
+  const auto value = [&](std::uint32_t j) {
+    return grouped[static_cast<std::size_t>(best[j])].log_likelihood;
+  };
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return value(a) > value(b) || (value(a) == value(b) && a < b);
+  });
+  double log_weight = 0.0;
+  for (const std::uint32_t j : order) log_weight += value(j);
+  if (same_for_all) {
+    log_weight += static_cast<double>(z - order.size()) * log_unassociated(0);
+  } else {
+    for (std::size_t j = 0; j < z; ++j) {
+      if (assignment[j] == kNewLandmark) log_weight += log_unassociated(j);
+    }
+  }
+  return log_weight;
+}
+
 }  // namespace fastslam::engine::internal

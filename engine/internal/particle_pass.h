@@ -92,9 +92,13 @@ class ParticlePass final : public Pass {
     in.motion.sigma_control[1] = c.motion.sigma_control[1];
     in.motion.ahead = &ahead_.ready();
     in.known = {&s_.sensor, s_.r, c.existence, scan_step};
-    in.search = {&s_.sensor,         s_.r,
-                 c.gating.gate,      c.gating.search_scale,
-                 c.log_new_landmark, s_.landmark_variance_bound};
+    in.search.sensor = &s_.sensor;
+    in.search.r = s_.r;
+    in.search.gate = c.gating.gate;
+    in.search.search_scale = c.gating.search_scale;
+    in.search.log_p0 = c.log_new_landmark;
+    in.search.variance_bound = s_.landmark_variance_bound;
+    in.search.bearings = bearings_;
     in.map = {&s_.sensor, s_.r, c.existence, c.sensor.max_range, c.sensor.field_of_view, scan_step};
     in.scan_step = scan_step;
     in.record = c.record_trajectory && !s_.pending.empty();
@@ -111,10 +115,13 @@ class ParticlePass final : public Pass {
         ahead_.start_next(scan_step, queued, m);
       }
     }
-    const PassInputs in = inputs(scan_step);
     if constexpr (!kKnown) {
-      if (scan != nullptr) score_unassociated(*scan);
+      if (scan != nullptr) {
+        score_unassociated(*scan);
+        scan_bearings(*scan, bearings_);
+      }
     }
+    const PassInputs in = inputs(scan_step);
     if (in.record) recorder_.begin(s_.store.log_weight(), queued);
     block_seconds_.assign(blocks.tasks, 0.0);
     kernel_.for_each_block(
@@ -292,6 +299,7 @@ class ParticlePass final : public Pass {
   std::vector<double> block_seconds_;
   // This scan's "no landmark" scores (score_unassociated); every block reads them.
   std::vector<double> log_unassociated_;
+  std::vector<Eigen::Vector2d> bearings_;  // the scan's, for the candidate search
   bool detection_model_ = false;
   MotionNormalsAhead ahead_;  // FastSLAM 1.0 only; last: destroyed, so waited for, first
 };

@@ -5,7 +5,8 @@
 // same log-likelihoods, and 1.0's tags must point at their terms (1.0 under maximum likelihood
 // once evaluate_all has evaluated the bounded candidates; each bound at or above the exact ln p).
 // choose_maximum_likelihood against associate_maximum_likelihood on the brute-force list: the
-// same assignment, the bit-identical weight, and the candidates the scan report reads.
+// same assignment, the bit-identical weight, and the candidates the scan report reads. Half the
+// runs place the discs from the scan's bearings (SearchInput::bearings), as the filter does.
 #include "engine/internal/candidate_search.h"
 
 #include <algorithm>
@@ -113,6 +114,10 @@ void expect_search_is_brute_force(std::uint64_t seed) {
     prior.cov *= 0.01;
     prior.cov(2, 2) = 0.0004;
   }
+  // Odd seeds: the discs' centres from the scan's bearings, as the filter's pass gives them.
+  std::vector<Eigen::Vector2d> bearings;
+  scan_bearings(w.scan, bearings);
+  if (seed % 2 == 1) w.in.bearings = bearings;
   CandidateScratch scratch;
   find_candidates<N, kFs2, kMl>(w.in, prior, w.map, w.index, w.scan, scratch);
   if constexpr (!kFs2 && kMl) {
@@ -183,6 +188,9 @@ TEST(CandidateSearchTest, FastSlam1MaximumLikelihoodChoiceIsTheEagerOne) {
       const double want_w = per_observation
                                 ? associate_maximum_likelihood(eager, scores, want)
                                 : associate_maximum_likelihood(eager, w.in.log_p0, want);
+      std::vector<Eigen::Vector2d> bearings;
+      scan_bearings(w.scan, bearings);
+      if (seed % 2 == 1) w.in.bearings = bearings;
       CandidateScratch scratch;
       find_candidates<3, false, true>(w.in, prior, w.map, w.index, w.scan, scratch);
       std::vector<std::int64_t> got(w.scan.size());

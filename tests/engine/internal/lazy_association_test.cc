@@ -5,7 +5,9 @@
 // scores: the same assignment and bit-identical weight; every candidate left is exact and one
 // the eager list holds; an observation left new keeps all of its candidates and an associated
 // one its chosen pair (what the scan report and the map update read); a candidate whose bound
-// is below what its observation takes is never evaluated.
+// is below what its observation takes is never evaluated. The per-observation choice
+// (independent_maximum_likelihood) against the same oracle on scans where no landmark is a
+// candidate of two observations, and slots_disjoint against a brute-force count.
 #include "engine/internal/lazy_association.h"
 
 #include <algorithm>
@@ -47,8 +49,10 @@ Key key_of(const AssociationCandidate& c) {
 
 // `kind` 0: small scans; 1: large ones (more than 32 observations assigned: the taken slots'
 // short list gives way to the assignment); 2: a few observations with many candidates each,
-// competing for the same landmarks.
+// competing for the same landmarks; 3: as 0, but each observation's landmarks its own.
 Scan random_scan(std::mt19937_64& rng, int kind) {
+  const bool disjoint = kind == 3;
+  if (disjoint) kind = 0;
   std::uniform_real_distribution<double> u(0.0, 1.0);
   Scan s;
   const std::uint32_t max_observations[] = {9, 80, 5};
@@ -67,8 +71,9 @@ Scan random_scan(std::mt19937_64& rng, int kind) {
       t.kept = u(rng) < 0.85;
       const auto index = static_cast<std::uint32_t>(s.truth.size());
       s.truth.push_back(t);
-      s.index[{j, n}] = index;
-      AssociationCandidate c{j, n, 0.0, index, t.mahalanobis2};
+      const memory::Slot slot = disjoint ? j * 100 + n : n;
+      s.index[{j, slot}] = index;
+      AssociationCandidate c{j, slot, 0.0, index, t.mahalanobis2};
       if (t.kept) {
         c.log_likelihood = t.log_likelihood;
         s.eager.push_back(c);
@@ -96,7 +101,8 @@ Scan random_scan(std::mt19937_64& rng, int kind) {
 }
 
 // Runs both choices and checks the lazy one against the eager one. Returns the evaluations.
-std::size_t expect_lazy_is_eager(const Scan& s, std::span<const double> scores, bool one_score) {
+std::size_t expect_lazy_is_eager(const Scan& s, std::span<const double> scores, bool one_score,
+                                 bool independent = false) {
   Candidates eager = s.eager;
   std::vector<std::int64_t> want(s.observations, 7);
   const double want_w = one_score ? associate_maximum_likelihood(eager, scores[0], want)
@@ -120,7 +126,9 @@ std::size_t expect_lazy_is_eager(const Scan& s, std::span<const double> scores, 
   const auto unassociated = [&](std::size_t j) { return one_score ? scores[0] : scores[j]; };
   LazyScratch scratch;
   const double got_w =
-      lazy_maximum_likelihood(lazy, unassociated, one_score, got, scratch, evaluate);
+      independent
+          ? independent_maximum_likelihood(lazy, unassociated, one_score, got, scratch, evaluate)
+          : lazy_maximum_likelihood(lazy, unassociated, one_score, got, scratch, evaluate);
   EXPECT_EQ(got, want);
   EXPECT_EQ(got_w, want_w);  // bit for bit: the same sum in the same order
   for (int e : evaluated) EXPECT_LE(e, 1);
@@ -167,6 +175,36 @@ TEST(LazyMaximumLikelihood, EqualsTheEagerChoiceWithPerObservationScores) {
     std::vector<double> scores(s.observations);
     for (double& v : scores) v = -6.0 + 6.0 * u(rng);
     expect_lazy_is_eager(s, scores, false);
+  }
+}
+
+TEST(IndependentMaximumLikelihood, EqualsTheEagerChoice) {
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::size_t evaluations = 0, bounded = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    const Scan s = random_scan(rng, 3);
+    ASSERT_TRUE(slots_disjoint(s.lazy));
+    for (const AssociationCandidate& c : s.lazy) bounded += c.tag == kBoundOnly ? 1 : 0;
+    const bool one_score = trial % 2 == 0;
+    std::vector<double> scores(one_score ? 1 : s.observations);
+    for (double& v : scores) v = -6.0 + 6.0 * u(rng);
+    evaluations += expect_lazy_is_eager(s, scores, one_score, true);
+  }
+  EXPECT_LT(evaluations, bounded);
+}
+
+TEST(IndependentMaximumLikelihood, SlotsDisjointIsBruteForce) {
+  std::mt19937_64 rng(24);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const Scan s = random_scan(rng, trial % 4 == 3 ? 3 : trial % 4 == 1 ? 2 : 0);
+    bool shared = false;
+    for (const AssociationCandidate& a : s.lazy) {
+      for (const AssociationCandidate& b : s.lazy) {
+        shared = shared || (a.slot == b.slot && a.observation != b.observation);
+      }
+    }
+    EXPECT_EQ(slots_disjoint(s.lazy), !shared);
   }
 }
 
