@@ -11,6 +11,7 @@ docs/results.json, so re-measuring one section leaves the others as they were me
     /usr/bin/python3 tools/scripts/results.py --run front-ends # the C API's and Python's cost
     /usr/bin/python3 tools/scripts/results.py --run whole-process [--fasterslam DIR]
                                                # the whole command beside FasterSLAM's
+    /usr/bin/python3 tools/scripts/results.py --run latency  # per-scan latency, peak memory
     /usr/bin/python3 tools/scripts/results.py                  # re-render from results.json
 
 Paths are relative to the repository root; ../shared must be beside it.
@@ -146,6 +147,22 @@ README_ROWS = [
 ]
 README_BEGIN = "<!-- results.py: begin -->"
 README_END = "<!-- results.py: end -->"
+
+# Per-scan latency for a streaming user: (label, arguments) run with seeds LATENCY_SEEDS and 1
+# and 2 threads; metrics.json's scan_latency_ms (each scan's Filter::observe) and peak RSS.
+LATENCY = [
+    ("the stress run (10^5-landmark grid, FS1 ML, M = 100)", ""),
+    ("webmap, FS1 known ids, M = 100", f"{WEBMAP} --association known"),
+    ("webmap, FS1 ML, M = 100", f"{WEBMAP} --association ml"),
+    ("webmap, FS1 ML, M = 1000", f"{WEBMAP} --association ml --particles 1000"),
+    ("Victoria Park, FS1 ML, M = 100", f"{VP} --association ml"),
+    ("MRCLAM robot 1, FS1 mixed, M = 100", f"{UTIAS} --robot 1"),
+]
+LATENCY_SEEDS = [1, 2, 3]
+# Peak memory at 10^7 landmarks: the scaling study's maps pre-grown to N (shared by the M
+# particles until they diverge), then scans; the process's peak resident set.
+MEMORY_COMMAND = ("bench scaling --landmarks 10000000 --particles 100 --updates 100 "
+                  "--algorithm fastslam1 --association ml --threads 1")
 
 # Speed tables: (table id, title, binary, filter, note); the median of the repetitions of each
 # benchmark the filter selects, in the benchmark's own time unit.
@@ -341,6 +358,8 @@ def render(data):
             lines.append(f"| {r['particles']} | {r['program']} | {r['wall_ms']:.1f} "
                          f"({r['wall_min_ms']:.1f}) | {r['cpu_ms']:.1f} | {inside} | {ratio} |")
         lines.append("")
+    if data.get("latency"):
+        lines += render_latency(data["latency"])
     return "\n".join(lines)
 
 
@@ -375,6 +394,73 @@ def measure_whole_process(build, repetitions, fasterslam):
     return {"command": shown, "rows": result["rows"], "rounds": result["rounds"]}
 
 
+def run_peak(command):
+    """Runs `command` (output discarded); returns its peak resident set in bytes."""
+    child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(child.pid, 0)
+    child.returncode = os.waitstatus_to_exitcode(status)
+    if child.returncode != 0:
+        sys.exit(f"results.py: {' '.join(command)} exited {child.returncode}")
+    return usage.ru_maxrss * 1024  # Linux reports kilobytes
+
+
+def measure_latency(build):
+    fastslam = os.path.join(build, "tools", "fastslam")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, args in LATENCY:
+            for threads in (1, 2):
+                runs = []
+                for seed in LATENCY_SEEDS:
+                    out = os.path.join(tmp, "run")
+                    peak = run_peak([fastslam, "run", *args.split(), "--seed", str(seed),
+                                     "--threads", str(threads), "--no-plot", "--no-progress",
+                                     "--out", out])
+                    with open(os.path.join(out, "metrics.json")) as f:
+                        m = json.load(f)
+                    runs.append(dict(m["scan_latency_ms"], peak_rss_bytes=peak,
+                                     landmarks=m.get("landmarks"), seed=seed))
+                rows.append({"label": label, "args": args, "threads": threads, "runs": runs})
+        memory_out = os.path.join(tmp, "scaling.json")
+        peak = run_peak([fastslam, *MEMORY_COMMAND.split(), "--json", memory_out])
+        with open(memory_out) as f:
+            point = json.load(f)["points"][0]
+    memory = {"command": f"fastslam {MEMORY_COMMAND}", "peak_rss_bytes": peak,
+              "landmarks": point["landmarks"], "particles": point["particles"],
+              "live_bytes": point["live_bytes"], "one_map_bytes": point["lower_bound_bytes"]}
+    return {"rows": rows, "memory": memory, "seeds": LATENCY_SEEDS}
+
+
+def render_latency(lat):
+    seeds = lat["seeds"]
+    lines = ["## Per-scan latency and peak memory", "",
+             f"Measured {lat['date']} on {lat['machine']}: what a caller feeding scans one at a "
+             "time waits for, each scan's `Filter::observe` (metrics.json `scan_latency_ms`: "
+             "nearest-rank percentiles from 1 % buckets, max exact), median over seeds "
+             f"{seeds[0]}-{seeds[-1]} of each; the peak resident set of the whole process. "
+             "Command: `fastslam run ARGS --seed S --threads T --no-plot --no-progress --out "
+             "DIR`.", "",
+             "| run | threads | p50, ms | p99, ms | max, ms | peak RSS, MiB |",
+             "|---|---|---|---|---|---|"]
+    for r in lat["rows"]:
+        def med(key, runs=r["runs"]):
+            return statistics.median(run[key] for run in runs)
+        lines.append(f"| {r['label']} | {r['threads']} | {med('p50'):.3g} | {med('p99'):.3g} | "
+                     f"{med('max'):.3g} | {med('peak_rss_bytes') / 2**20:.0f} |")
+    lines += ["", "ARGS:", ""]
+    lines += [f"- {label}: `{args or '(none)'}`" for label, args in LATENCY]
+    mem = lat["memory"]
+    n, m = mem["landmarks"], mem["particles"]
+    lines += ["", f"Peak memory at N = {n:,} landmarks, M = {m}: `{mem['command']}` (maps "
+              "pre-grown to N, shared until the particles' paths diverge, then 100 scans): "
+              f"peak resident set {mem['peak_rss_bytes'] / 2**30:.2f} GiB, "
+              f"{mem['peak_rss_bytes'] / (n * m):.2f} bytes per particle-landmark and "
+              f"{mem['peak_rss_bytes'] / n:.0f} per landmark; the live tree nodes at the end "
+              f"{mem['live_bytes'] / 2**30:.2f} GiB against {mem['one_map_bytes'] / 2**30:.2f} "
+              "GiB for one map.", ""]
+    return lines
+
+
 def readme_table(data):
     titles = {table_id: title.split(" (")[0] for table_id, title, _, _, _ in ACCURACY}
     lines = ["| run | metric | mean / median / worst |", "|---|---|---|"]
@@ -401,7 +487,7 @@ def update_readme(data):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--run", choices=["accuracy", "speed", "front-ends", "whole-process",
-                                          "all"], help="measure anew")
+                                          "latency", "all"], help="measure anew")
     parser.add_argument("--fasterslam", help="FasterSLAM's built src/ folder (whole-process)")
     parser.add_argument("--build", default=os.path.join(ROOT, "build", "release"))
     parser.add_argument("--jobs", type=int, default=2, help="seeds run at once (accuracy)")
@@ -431,6 +517,8 @@ def main():
     if opts.run in ("whole-process", "all"):
         data["whole_process"] = dict(stamp, **measure_whole_process(opts.build, opts.repetitions,
                                                                     opts.fasterslam))
+    if opts.run in ("latency", "all"):
+        data["latency"] = dict(stamp, **measure_latency(opts.build))
     with open(opts.json, "w") as f:
         json.dump(data, f, indent=1, sort_keys=True)
         f.write("\n")
