@@ -65,6 +65,23 @@ class Render(unittest.TestCase):
         self.assertIn("| 100 | FasterSLAM (1 thread) | 25.0 (24.0) | 24.5 |  | 1.00 |", text)
         self.assertIn("`/usr/bin/python3 bench/compare/peers.py --rounds 5`", text)
 
+    def test_latency_rows_take_the_median_over_seeds(self):
+        runs = [{"p50": p50, "p99": 2 * p50, "max": 3 * p50, "peak_rss_bytes": 2**20 * mib}
+                for p50, mib in [(1.0, 10), (5.0, 30), (2.0, 20)]]
+        data = {"latency": {
+            "date": "2026-01-01", "machine": "test machine", "seeds": [1, 2, 3],
+            "rows": [{"label": "webmap, FS1 ML, M = 100", "args": "--association ml",
+                      "threads": 2, "runs": runs}],
+            "memory": {"command": "fastslam bench scaling --landmarks 10000000",
+                       "peak_rss_bytes": 2 * 2**30, "landmarks": 10**7, "particles": 100,
+                       "live_bytes": 2**30, "one_map_bytes": 2**30}}}
+        text = results.render(data)
+        self.assertIn("## Per-scan latency and peak memory", text)
+        self.assertIn("| webmap, FS1 ML, M = 100 | 2 | 2 | 4 | 6 | 20 |", text)
+        self.assertIn("N = 10,000,000 landmarks, M = 100", text)
+        self.assertIn("peak resident set 2.00 GiB, 2.15 bytes per particle-landmark and 215 "
+                      "per landmark", text)
+
     def test_readme_table(self):
         table = results.readme_table(self.fixture())
         self.assertIn("| Bailey's webmap: FastSLAM 1.0, known ids | pose RMSE, m | "
