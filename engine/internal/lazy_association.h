@@ -72,6 +72,19 @@ inline bool before(const AssociationCandidate& a, const AssociationCandidate& b)
   return a.slot < b.slot;
 }
 
+// The weight's tail, as associate_maximum_likelihood adds it: the "no landmark" scores of the
+// observations left new, after the `taken` pairs' values in `log_weight`.
+template <class Unassociated>
+double plus_unassociated(double log_weight, const Unassociated& log_unassociated, bool same_for_all,
+                         std::span<const std::int64_t> assignment, std::size_t taken) {
+  const std::size_t z = assignment.size();
+  if (same_for_all) return log_weight + static_cast<double>(z - taken) * log_unassociated(0);
+  for (std::size_t j = 0; j < z; ++j) {
+    if (assignment[j] == kNewLandmark) log_weight += log_unassociated(j);
+  }
+  return log_weight;
+}
+
 }  // namespace lazy_association_detail
 
 // `log_unassociated(j)`: observation j's score of "no landmark"; `same_for_all`: it is one
@@ -84,6 +97,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
                                Evaluate&& evaluate) {
   using lazy_association_detail::before;
   using lazy_association_detail::kBlocked;
+  using lazy_association_detail::plus_unassociated;
   constexpr double kInf = std::numeric_limits<double>::infinity();
   const std::size_t z = assignment.size();
   std::fill(assignment.begin(), assignment.end(), kNewLandmark);
@@ -218,14 +232,7 @@ double lazy_maximum_likelihood(std::vector<AssociationCandidate>& candidates,
       if (c.tag < kDropped) candidates.push_back(c);
     }
   }
-  if (same_for_all) {
-    log_weight += static_cast<double>(z - taken.size()) * log_unassociated(0);
-  } else {
-    for (std::size_t j = 0; j < z; ++j) {
-      if (assignment[j] == kNewLandmark) log_weight += log_unassociated(j);
-    }
-  }
-  return log_weight;
+  return plus_unassociated(log_weight, log_unassociated, same_for_all, assignment, taken.size());
 }
 
 // Whether no landmark is a candidate of two observations (then the choice is made per
@@ -255,6 +262,7 @@ double independent_maximum_likelihood(std::vector<AssociationCandidate>& candida
                                       std::span<std::int64_t> assignment, LazyScratch& scratch,
                                       Evaluate&& evaluate) {
   using lazy_association_detail::before;
+  using lazy_association_detail::plus_unassociated;
   const std::size_t z = assignment.size();
   std::fill(assignment.begin(), assignment.end(), kNewLandmark);
   // By observation (stable), so that each one's candidates are a range.
@@ -311,14 +319,7 @@ double independent_maximum_likelihood(std::vector<AssociationCandidate>& candida
   });
   double log_weight = 0.0;
   for (const std::uint32_t j : order) log_weight += value(j);
-  if (same_for_all) {
-    log_weight += static_cast<double>(z - order.size()) * log_unassociated(0);
-  } else {
-    for (std::size_t j = 0; j < z; ++j) {
-      if (assignment[j] == kNewLandmark) log_weight += log_unassociated(j);
-    }
-  }
-  return log_weight;
+  return plus_unassociated(log_weight, log_unassociated, same_for_all, assignment, order.size());
 }
 
 }  // namespace fastslam::engine::internal
