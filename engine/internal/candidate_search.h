@@ -121,10 +121,11 @@ std::array<double, 4> plan_discs(const SearchInput& in, const Pose& pose,
   // The sensor's heading, rotated by each bearing (angle addition, to rounding the same point
   // as landmark_from: the disc is a search region, the exact terms never read it).
   const bool rotate = in.bearings.size() == scan.size();
-  const Eigen::Vector2d origin = sensor.sensor_position(pose);
+  Eigen::Vector2d origin = Eigen::Vector2d::Zero();
   double cos_heading = 1.0;
   double sin_heading = 0.0;
   if (rotate) {
+    origin = sensor.sensor_position(pose);
     const double heading = pose[2] + sensor.offset().yaw;
     cos_heading = std::cos(heading);
     sin_heading = std::sin(heading);
