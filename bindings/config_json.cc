@@ -81,6 +81,7 @@ void visit_config(C& c, V& v) {
   v.field("grain", c.grain);
   v.seconds_or_never("split_seconds", c.split_seconds);
   v.field("record_trajectory", c.record_trajectory);
+  v.field("motion_draw", c.motion_draw);
   v.object("ekf", [&](V& e) {
     e.field("gate_accept", c.ekf.gate_accept);
     e.field("gate_new", c.ekf.gate_new);

@@ -60,6 +60,16 @@ void validate(const FilterConfig& c) {
   parallel::validate(c.resample);
   require(enum_known(c.resample.when), "resample.when is not a known policy");
   require(enum_known(c.resample.scheme), "resample.scheme is not a known scheme");
+  require(enum_known(c.motion_draw), "motion_draw is not a known draw");
+  if (c.motion_draw == MotionDraw::kComposed) {
+    require(c.algorithm == Algorithm::kFastSlam1,
+            "motion_draw 'composed' is FastSLAM 1.0's (2.0 and the EKF carry the motion's "
+            "covariance already); use 'control'");
+    require(c.motion.kind == MotionKind::kBaileyCar || c.motion.kind == MotionKind::kUnicycle ||
+                c.motion.kind == MotionKind::kAckermann,
+            std::string("motion_draw 'composed' needs an odometry model, not '") +
+                std::string(to_string(c.motion.kind)) + "' (its velocities differ per particle)");
+  }
   require(c.grain >= 1, "grain must be at least 1");
   require(c.split_seconds >= 0, "split_seconds must be >= 0 (infinity: never split)");
   require(c.threads <= parallel::ParticleKernel::kMaxThreads,

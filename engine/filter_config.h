@@ -97,6 +97,23 @@ struct ExistenceConfig {
   double range_margin = 1.0;  // m, >= 0
 };
 
+// How FastSLAM 1.0 moves its particles between scans: one draw per control (the paper's
+// s_t ~ p(s_t | u_t, s_t-1) at every control), or one draw per run of queued controls from the
+// run's first-order Gaussian (engine/motion_run.h; odometry models only).
+enum class MotionDraw : std::uint8_t {
+  kEveryControl,  // 0: the bytes of a saved state written before the field existed
+  kComposed,
+};
+
+template <>
+struct EnumNames<MotionDraw> {
+  static constexpr std::string_view kWhat = "motion draw";
+  static constexpr std::array<EnumName<MotionDraw>, 2> kNames = {{
+      {MotionDraw::kEveryControl, "control"},
+      {MotionDraw::kComposed, "composed"},
+  }};
+};
+
 // Unknown data association (ml, das): gating, and the search for candidates.
 struct AssociationConfig {
   // A candidate is considered only when its squared Mahalanobis distance v^T Q^-1 v (FastSLAM
@@ -160,6 +177,9 @@ struct FilterConfig {
   // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
   // store per particle per control and a reduction per control).
   bool record_trajectory = false;
+  // FastSLAM 1.0 with an odometry model only (validate refuses the rest). In the padding after
+  // record_trajectory, so that a saved state's later fields keep their offsets.
+  MotionDraw motion_draw = MotionDraw::kEveryControl;
   EkfConfig ekf;  // Algorithm::kEkf only
   // The initial pose of every particle (x, y, theta; v, omega for kBrownian; v, kappa for
   // kBrownianCurvature).
@@ -176,5 +196,6 @@ void validate(const FilterConfig& config);
 constexpr std::string_view to_string(Algorithm algorithm) { return enum_name(algorithm); }
 constexpr std::string_view to_string(Association association) { return enum_name(association); }
 constexpr std::string_view to_string(MotionKind kind) { return enum_name(kind); }
+constexpr std::string_view to_string(MotionDraw draw) { return enum_name(draw); }
 
 }  // namespace fastslam::engine

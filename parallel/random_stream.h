@@ -31,6 +31,8 @@ enum class Purpose : std::uint32_t {
   kResample = 4,
   kSimulator = 5,
   kInitial = 6,
+  kMotionRun = 7,         // the composed motion draw's first two normals (engine/motion_run.h)
+  kMotionRunHeading = 8,  // and its third
   kUser = 64
 };
 

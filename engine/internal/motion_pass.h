@@ -4,7 +4,10 @@
 // control by the vectorised kernels of engine/motion_batch.h (1.0: sample_block with the keyed
 // motion normals, taken from the ahead window where it holds them; 2.0: predict_block), and
 // copied back. When the trajectory is recorded it adds the block's weighted sums after every
-// control (TrajectorySums::add).
+// control (TrajectorySums::add). Under the composed draw (FastSLAM 1.0, odometry models) the
+// pass's runs (engine/motion_run.h, composed once per pass) move each lane once per run, by
+// three normals of stream (seed, the run's last step, particle, kMotionRun and
+// kMotionRunHeading), and the points inside a run come from the run's start sums.
 // Thread safety: concurrent calls on disjoint blocks with distinct scratch are safe. Costs:
 // O(count K) for K queued controls; no allocation once the scratch has grown.
 #pragma once
@@ -20,6 +23,7 @@
 #include "engine/internal/scan_plan.h"
 #include "engine/internal/trajectory_recorder.h"
 #include "engine/motion_batch.h"
+#include "engine/motion_run.h"
 #include "memory/particle_store.h"
 #include "parallel/random_stream.h"
 
@@ -31,6 +35,7 @@ struct MotionScratch {
   std::vector<double> weights;  // the block's lanes' weights while recording the trajectory
   std::vector<ControlStep> steps;
   std::vector<std::uint64_t> keys;
+  std::vector<double> base;  // the composed draw's group sums at a run's start
 };
 
 // What the motion stage reads besides the particles.
@@ -42,7 +47,15 @@ struct MotionInput {
   std::uint32_t first_particle = 0;
   double sigma_control[2] = {0.0, 0.0};
   const MotionNormalsWindow* ahead = nullptr;  // FastSLAM 1.0: normals drawn ahead (may be empty)
+  // The composed draw's runs of `pending` and each control's mean displacement from its run's
+  // start (engine/motion_run.h); empty under the draw per control.
+  std::span<const MotionRun> runs;
+  std::span<const Eigen::Vector3d> partial;
 };
+
+// Whether a model can take the composed draw (engine/motion_run.h).
+template <class Motion>
+inline constexpr bool kComposable = Motion::kStateDim == 3 && !Motion::kNoOdometry;
 
 namespace motion_pass_detail {
 
@@ -64,6 +77,35 @@ inline void draw_motion_normals(const MotionInput& in, std::span<const std::uint
   }
 }
 
+// The composed draw on lanes [0, lanes) of (x, y, theta), lane l being particle begin + l.
+inline void advance_composed(const MotionInput& in, std::size_t begin, std::size_t lanes, double* x,
+                             double* y, double* theta, const TrajectorySums* record,
+                             const double* w, MotionScratch& scratch) {
+  double* const n0 = scratch.columns.data() + 3 * lanes;
+  double* const n1 = n0 + lanes;
+  double* const n2 = n1 + lanes;
+  double* const spare = n2 + lanes;
+  const auto first = in.first_particle + static_cast<std::uint32_t>(begin);
+  if (record != nullptr) scratch.base.resize(lanes / kMotionLanes * TrajectorySums::kTerms);
+  for (const MotionRun& run : in.runs) {
+    const std::size_t last = run.first + run.count - 1;
+    if (record != nullptr && run.count > 1) {
+      TrajectorySums::group_sums(lanes, x, y, theta, w, scratch.base.data());
+      for (std::size_t k = run.first; k < last; ++k) {
+        record->add_displaced(k, begin, lanes, scratch.base.data(), in.partial[k].data());
+      }
+    }
+    const std::uint64_t key = in.pending[last].step;
+    parallel::normal_pairs_for_particles(in.seed, key, parallel::Purpose::kMotionRun, first,
+                                         lanes, std::span(n0, lanes), std::span(n1, lanes));
+    parallel::normal_pairs_for_particles(in.seed, key, parallel::Purpose::kMotionRunHeading,
+                                         first, lanes, std::span(n2, lanes),
+                                         std::span(spare, lanes));
+    apply_run(run, lanes, x, y, theta, n0, n1, n2);
+    if (record != nullptr) record->add(last, begin, lanes, x, y, theta, w);
+  }
+}
+
 }  // namespace motion_pass_detail
 
 // Applies in.pending to particles [begin, begin + count) of `store` (and, for 2.0, their
@@ -78,8 +120,12 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
   const typename Motion::Control sigmas(in.sigma_control[0], in.sigma_control[1]);
   const std::size_t lanes = padded_lanes(count);
   const std::size_t k_steps = in.pending.size();
-  // Columns: N states, then (2.0) E covariance entries or (1.0) two normals per step of a batch.
-  const std::size_t columns = N + (kFs2 ? E : 2 * std::min(k_steps, kStepBatch));
+  bool composed = false;
+  if constexpr (!kFs2 && kComposable<Motion>) composed = !in.runs.empty();
+  // Columns: N states, then (2.0) E covariance entries, (1.0) two normals per step of a batch,
+  // or (composed) four normal columns.
+  const std::size_t columns =
+      N + (kFs2 ? E : (composed ? 4 : 2 * std::min(k_steps, kStepBatch)));
   scratch.columns.resize(columns * lanes);
   auto column = [&](std::size_t c) { return scratch.columns.data() + c * lanes; };
   scratch.steps.resize(k_steps);
@@ -108,6 +154,14 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
   if (record != nullptr) {
     scratch.weights.resize(lanes);
     record->weights(begin, lanes, scratch.weights.data());
+  }
+  if constexpr (!kFs2 && kComposable<Motion>) {
+    if (composed) {
+      motion_pass_detail::advance_composed(in, begin, lanes, block.col[0], block.col[1],
+                                           block.col[2], record, scratch.weights.data(), scratch);
+      for (int k = 0; k < N; ++k) std::copy_n(block.col[k], count, store_col[k] + begin);
+      return;
+    }
   }
   // Recording the trajectory needs the poses after every step; otherwise one call runs a batch.
   const std::size_t per_call = record != nullptr ? 1 : kStepBatch;

@@ -91,6 +91,8 @@ class ParticlePass final : public Pass {
     in.motion.sigma_control[0] = c.motion.sigma_control[0];
     in.motion.sigma_control[1] = c.motion.sigma_control[1];
     in.motion.ahead = &ahead_.ready();
+    in.motion.runs = runs_;
+    in.motion.partial = partial_;
     in.known = {&s_.sensor, s_.r, c.existence, scan_step};
     in.search.sensor = &s_.sensor;
     in.search.r = s_.r;
@@ -109,8 +111,9 @@ class ParticlePass final : public Pass {
     const std::size_t m = s_.store.size();
     const std::size_t queued = s_.pending.size();
     const PassBlocks blocks(m, kernel_.threads(), s_.config.grain, heavy_);
+    const bool composed = compose();
     if constexpr (!kFs2) {
-      if (blocks.tasks == 1 && kernel_.threads() > 1 && m <= MotionNormalsAhead::kMaxParticles &&
+      if (!composed && blocks.tasks == 1 && kernel_.threads() > 1 && m <= MotionNormalsAhead::kMaxParticles &&
           scan != nullptr) {
         ahead_.start_next(scan_step, queued, m);
       }
@@ -134,6 +137,22 @@ class ParticlePass final : public Pass {
              s_.config.split_seconds;
     if (in.record) recorder_.finish(queued, s_.counters.controls - queued);
     s_.pending.clear();
+  }
+
+  // Under the composed motion draw, the runs of the queued controls (runs_ stays empty
+  // otherwise). Returns whether the draw is composed.
+  bool compose() {
+    runs_.clear();
+    if constexpr (!kFs2 && kComposable<Motion>) {
+      if (s_.config.motion_draw != MotionDraw::kComposed) return false;
+      steps_.clear();
+      for (const PendingControl& c : s_.pending) steps_.push_back({c.u0, c.u1, c.dt});
+      const typename Motion::Control sigmas(s_.config.motion.sigma_control[0],
+                                            s_.config.motion.sigma_control[1]);
+      compose_runs(motion_, steps_, sigmas, runs_, partial_);
+      return true;
+    }
+    return false;
   }
 
   void run_block(const PassInputs& in, const std::vector<PlannedObservation>* scan, std::size_t t,
@@ -300,6 +319,10 @@ class ParticlePass final : public Pass {
   // This scan's "no landmark" scores (score_unassociated); every block reads them.
   std::vector<double> log_unassociated_;
   std::vector<Eigen::Vector2d> bearings_;  // the scan's, for the candidate search
+  // The composed motion draw's runs of the pass's controls (engine/motion_run.h).
+  std::vector<ControlStep> steps_;
+  std::vector<MotionRun> runs_;
+  std::vector<Eigen::Vector3d> partial_;
   bool detection_model_ = false;
   MotionNormalsAhead ahead_;  // FastSLAM 1.0 only; last: destroyed, so waited for, first
 };

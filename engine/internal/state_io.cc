@@ -129,6 +129,11 @@ void put_maps(const memory::ParticleStore& store, std::ostream& out) {
 
 // The config, checked before any of its values is used: a bool must be 0 or 1, and the values
 // must pass validate (enums in range, particles >= 1, ...).
+// motion_draw sits in record_trajectory's padding: a state saved before it existed reads as the
+// draw per control (its padding was cleared), and no later field moved.
+static_assert(offsetof(FilterConfig, motion_draw) == offsetof(FilterConfig, record_trajectory) + 1);
+static_assert(offsetof(FilterConfig, ekf) == offsetof(FilterConfig, record_trajectory) + 8);
+
 FilterConfig get_config(std::istream& in) {
   alignas(FilterConfig) unsigned char config_bytes[sizeof(FilterConfig)];
   read_bytes(in, config_bytes, sizeof(config_bytes));

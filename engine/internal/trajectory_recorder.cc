@@ -38,10 +38,9 @@ void TrajectorySums::weights(std::size_t begin, std::size_t lanes, double* w) co
   std::fill(w + real, w + lanes, 0.0);
 }
 
-void TrajectorySums::add(std::size_t k, std::size_t begin, std::size_t lanes, const double* x,
-                         const double* y, const double* theta, const double* w) const {
-  assert(begin % kG == 0 && lanes % kG == 0);
-  double* out = sums + (k * groups + begin / kG) * kT;
+void TrajectorySums::group_sums(std::size_t lanes, const double* x, const double* y,
+                                const double* theta, const double* w, double* out) {
+  assert(lanes % kG == 0);
   for (std::size_t at = 0; at < lanes; at += kG, out += kT) {
     double p[kT][kG];
     for (std::size_t l = 0; l < kG; ++l) {
@@ -56,6 +55,29 @@ void TrajectorySums::add(std::size_t k, std::size_t begin, std::size_t lanes, co
       p[4][l] = wl * s;
     }
     for (std::size_t t = 0; t < kT; ++t) out[t] = group_total(p[t]);
+  }
+}
+
+void TrajectorySums::add(std::size_t k, std::size_t begin, std::size_t lanes, const double* x,
+                         const double* y, const double* theta, const double* w) const {
+  assert(begin % kG == 0 && lanes % kG == 0);
+  group_sums(lanes, x, y, theta, w, sums + (k * groups + begin / kG) * kT);
+}
+
+void TrajectorySums::add_displaced(std::size_t k, std::size_t begin, std::size_t lanes,
+                                   const double* base, const double d[3]) const {
+  assert(begin % kG == 0 && lanes % kG == 0);
+  double* out = sums + (k * groups + begin / kG) * kT;
+  double c = 0.0;
+  double s = 0.0;
+  parallel::sincos(d[2], c, s);
+  for (std::size_t g = 0; g < lanes / kG; ++g, base += kT, out += kT) {
+    // Each lane's position moves by R(theta) (d0, d1): summed, by the weighted cos and sin.
+    out[0] = base[0];
+    out[1] = base[1] + (d[0] * base[3] - d[1] * base[4]);
+    out[2] = base[2] + (d[0] * base[4] + d[1] * base[3]);
+    out[3] = c * base[3] - s * base[4];
+    out[4] = s * base[3] + c * base[4];
   }
 }
 

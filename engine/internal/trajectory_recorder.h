@@ -8,6 +8,8 @@
 // holds whole groups too, takes the set's largest log-weight and folds every rank's groups in
 // rank order, so every rank records the points one process would. Owns the group sums and the
 // points not yet taken; borrows the group.
+// Under the composed motion draw the points between a run's start and its end are the start's
+// sums moved by the run's mean displacement (add_displaced), O(1) per group and control.
 // Thread safety: thread-compatible; the motion stage adds disjoint groups concurrently. Costs:
 // per control and lane a sincos and five multiply-adds in the motion stage; finish O(M K / 8)
 // for K controls; the sums (5 M K / 8 doubles) are reused.
@@ -42,6 +44,15 @@ struct TrajectorySums {
   // REQUIRES: as weights().
   void add(std::size_t k, std::size_t begin, std::size_t lanes, const double* x, const double* y,
            const double* theta, const double* w) const;
+  // The composed motion draw (engine/motion_run.h): the sums after control k of the lanes moved
+  // from their run's start by the run's mean displacement d (each position by R(theta) (d0,
+  // d1), each heading by d2), computed from `base`, the groups' sums at the start (kTerms per
+  // group, as group_sums writes them), without reading a lane. REQUIRES: as weights().
+  void add_displaced(std::size_t k, std::size_t begin, std::size_t lanes, const double* base,
+                     const double d[3]) const;
+  // The groups' sums of lanes [0, lanes) into out (kTerms per group), as add() computes them.
+  static void group_sums(std::size_t lanes, const double* x, const double* y, const double* theta,
+                         const double* w, double* out);
 };
 
 class TrajectoryRecorder {

@@ -63,6 +63,7 @@ void expect_same(const FilterConfig& a, const FilterConfig& b) {
   FASTSLAM_SAME(grain);
   FASTSLAM_SAME_BITS(split_seconds);
   FASTSLAM_SAME(record_trajectory);
+  FASTSLAM_SAME(motion_draw);
   FASTSLAM_SAME_BITS(ekf.gate_accept);
   FASTSLAM_SAME_BITS(ekf.gate_new);
   FASTSLAM_SAME(ekf.joint_compatibility);
@@ -133,6 +134,14 @@ TEST(ConfigJson, UnusualConfigRoundTripsBitForBit) {
   EXPECT_NE(text.find("\"x\": -0.0"), std::string::npos) << text;
 }
 
+TEST(ConfigJson, ComposedMotionDrawRoundTrips) {
+  FilterConfig c;
+  c.motion_draw = engine::MotionDraw::kComposed;
+  const std::string text = config_to_json(c);
+  EXPECT_NE(text.find("\"motion_draw\": \"composed\""), std::string::npos) << text;
+  expect_same(config_from_json(text), c);
+}
+
 TEST(ConfigJson, RandomDoublesRoundTripBitForBit) {
   std::mt19937_64 random(20);
   FilterConfig c;
@@ -198,6 +207,7 @@ TEST(ConfigJson, WritesEveryKey) {
                                           "grain",
                                           "split_seconds",
                                           "record_trajectory",
+                                          "motion_draw",
                                           "ekf.gate_accept",
                                           "ekf.gate_new",
                                           "ekf.joint_compatibility",
@@ -342,7 +352,10 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{R"({"grain": 0})", "config: grain must be at least 1"},
         BadCase{R"({"split_seconds": -1})", "config: split_seconds must be >= 0"},
         BadCase{R"({"existence": {"range_margin": -1}})", "existence.range_margin"},
-        BadCase{R"({"gating": {"search_scale": 0.5}})", "gating.search_scale"}));
+        BadCase{R"({"gating": {"search_scale": 0.5}})", "gating.search_scale"},
+        BadCase{R"({"motion_draw": "once"})", R"("motion_draw": unknown motion draw 'once')"},
+        BadCase{R"({"algorithm": "fastslam2", "motion_draw": "composed"})",
+                "config: motion_draw 'composed' is FastSLAM 1.0's"}));
 
 TEST(ConfigJson, WritingRefusesWhatJsonCannotHold) {
   FilterConfig c;

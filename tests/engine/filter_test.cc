@@ -31,6 +31,7 @@
 #include "engine/landmark_ekf.h"
 #include "engine/measurement_model.h"
 #include "engine/motion_model.h"
+#include "engine/motion_run.h"
 #include "memory/landmark_tree.h"
 #include "memory/particle_store.h"
 #include "parallel/random_stream.h"
@@ -115,6 +116,17 @@ TEST(FilterConfigTest, ValidateNamesTheFirstBadField) {
       {"split_seconds", [](FilterConfig& c) { c.split_seconds = kNaN; }},
       {"initial_pose", [](FilterConfig& c) { c.initial_pose[2] = kNaN; }},
       {"fraction", [](FilterConfig& c) { c.resample.ess_fraction = 1.5; }},
+      {"motion_draw", [](FilterConfig& c) { c.motion_draw = static_cast<MotionDraw>(7); }},
+      {"FastSLAM 1.0's",
+       [](FilterConfig& c) {
+         c.motion_draw = MotionDraw::kComposed;
+         c.algorithm = Algorithm::kFastSlam2;
+       }},
+      {"odometry model",
+       [](FilterConfig& c) {
+         c.motion_draw = MotionDraw::kComposed;
+         c.motion.kind = MotionKind::kBrownian;
+       }},
   };
   for (const Case& k : cases) {
     SCOPED_TRACE(k.needle);
@@ -348,6 +360,149 @@ TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording
       }
     }
   }
+}
+
+// The composed motion draw (engine/motion_run.h) through the filter, for each odometry model:
+// bit-identical for any thread count and grain, recorded or not, and across a save and load
+// between scans (the queue is saved, not drained); runs of 64 controls inside one pass (the
+// events queue 150 controls before a scan); another seed or the draw per control differ.
+TEST(FilterComposedDrawTest, BitIdenticalForAnyLayoutRecordingAndSaveLoad) {
+  const Scenario& s = loop_scenario();
+  std::vector<Event> events(s.events.begin(), s.events.begin() + 100);
+  for (std::size_t k = 0, added = 0; added < 150; ++k) {
+    if (!s.events[k].is_scan) {
+      events.push_back(s.events[k]);
+      ++added;
+    }
+  }
+  events.insert(events.end(), s.events.begin() + 100, s.events.begin() + 300);
+  const auto controls = static_cast<std::size_t>(
+      std::count_if(events.begin(), events.end(), [](const Event& e) { return !e.is_scan; }));
+  for (const MotionKind kind :
+       {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kAckermann}) {
+    SCOPED_TRACE("motion " + std::to_string(static_cast<int>(kind)));
+    FilterConfig config = base_config(Algorithm::kFastSlam1, kSanitized ? 20 : 45);
+    config.motion.kind = kind;
+    config.motion_draw = MotionDraw::kComposed;
+    config.grain = 16;
+    auto run = [&](const FilterConfig& c) {
+      Filter filter(c);
+      feed(filter, events, 0, events.size());
+      RunResult r;
+      r.trajectory = filter.take_trajectory();
+      r.estimate = filter.estimate();
+      r.particles = snapshot(filter);
+      return r;
+    };
+    const RunResult reference = run(config);
+    std::vector<TrajectoryPoint> recorded;
+    const std::tuple<unsigned, std::size_t, bool> layouts[] = {
+        {2, 1, false}, {2, 5, false}, {1, 1000, true}, {2, 16, true}};
+    for (const auto& [threads, grain, record] : layouts) {
+      SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain) +
+                   (record ? ", recorded" : ""));
+      FilterConfig c = config;
+      c.threads = threads;
+      c.grain = grain;
+      c.record_trajectory = record;
+      const RunResult r = run(c);
+      EXPECT_TRUE(identical(r.particles, reference.particles));
+      EXPECT_TRUE(identical(r.estimate, reference.estimate));
+      if (record) {
+        if (recorded.empty()) recorded = r.trajectory;
+        EXPECT_TRUE(identical(r.trajectory, recorded));
+        EXPECT_EQ(r.trajectory.size(), controls);
+      }
+    }
+    // Saved with controls queued (mid-way through the 150), loaded, continued.
+    {
+      Filter first(config);
+      feed(first, events, 0, 175);
+      std::stringstream saved;
+      first.save(saved);
+      const std::unique_ptr<Filter> resumed = Filter::load(saved);
+      feed(*resumed, events, 175, events.size());
+      EXPECT_TRUE(identical(snapshot(*resumed), reference.particles));
+    }
+    FilterConfig other = config;
+    other.seed += 1;
+    EXPECT_FALSE(identical(run(other).particles, reference.particles));
+    other = config;
+    other.motion_draw = MotionDraw::kEveryControl;
+    EXPECT_FALSE(identical(run(other).particles, reference.particles));
+  }
+}
+
+// Between scans the recorded trajectory is the weighted mean of each particle moved from the
+// run's start by the run's mean displacement (what TrajectorySums::add_displaced computes
+// without reading a lane), against a brute-force sum over the particles saved after each scan.
+TEST(FilterComposedDrawTest, TrajectoryInsideARunIsTheMeanDisplacementOfItsStart) {
+  const Scenario& s = loop_scenario();
+  FilterConfig config = base_config(Algorithm::kFastSlam1, 40);
+  config.motion_draw = MotionDraw::kComposed;
+  config.record_trajectory = true;
+  config.threads = 2;
+  config.grain = 8;
+  const BaileyCarModel model(config.motion.wheelbase);
+  const BaileyCarModel::Control sigmas(config.motion.sigma_control[0],
+                                       config.motion.sigma_control[1]);
+  Filter filter(config);
+  // The particles at each pass's start and the controls of the pass.
+  struct Start {
+    std::vector<double> x, y, theta, log_weight;
+    std::vector<ControlStep> controls;
+  };
+  std::vector<Start> passes(1);
+  auto keep = [&](const memory::ParticleStore& p, Start& start) {
+    start.x.assign(p.x().begin(), p.x().end());
+    start.y.assign(p.y().begin(), p.y().end());
+    start.theta.assign(p.theta().begin(), p.theta().end());
+    start.log_weight.assign(p.log_weight().begin(), p.log_weight().end());
+  };
+  keep(filter.particles(), passes[0]);
+  const std::size_t events = std::min<std::size_t>(s.events.size(), 400);
+  feed(filter, s.events, 0, events, [&](Filter& f, const Event& e) {
+    if (e.is_scan) {
+      passes.emplace_back();
+      keep(f.particles(), passes.back());  // right after a scan: nothing queued, no drain
+    } else {
+      passes.back().controls.push_back({e.control.u0, e.control.u1, e.dt});
+    }
+  });
+  const std::vector<TrajectoryPoint> got = filter.take_trajectory();
+  std::size_t control = 0;
+  std::size_t checked = 0;
+  std::vector<MotionRun> runs;
+  std::vector<Eigen::Vector3d> partial;
+  for (const Start& start : passes) {
+    compose_runs(model, start.controls, sigmas, runs, partial);
+    // Every control of the pass's first run but its last (which reads the drawn poses).
+    for (std::size_t k = 0; !runs.empty() && k + 1 < runs[0].count; ++k) {
+      long double w = 0, x = 0, y = 0, c = 0, sn = 0;
+      const double best = *std::max_element(start.log_weight.begin(), start.log_weight.end());
+      for (std::size_t i = 0; i < start.x.size(); ++i) {
+        const long double wi = std::exp(static_cast<long double>(start.log_weight[i] - best));
+        const double ct = std::cos(start.theta[i]);
+        const double st = std::sin(start.theta[i]);
+        w += wi;
+        x += wi * (start.x[i] + ct * partial[k][0] - st * partial[k][1]);
+        y += wi * (start.y[i] + st * partial[k][0] + ct * partial[k][1]);
+        c += wi * std::cos(static_cast<long double>(start.theta[i] + partial[k][2]));
+        sn += wi * std::sin(static_cast<long double>(start.theta[i] + partial[k][2]));
+      }
+      const TrajectoryPoint& p = got.at(control + k);
+      const double want_x = static_cast<double>(x / w);
+      const double want_y = static_cast<double>(y / w);
+      const double tol = 1e-10 * (1 + std::abs(want_x) + std::abs(want_y));
+      ASSERT_NEAR(p.x, want_x, tol) << "control " << control + k;
+      ASSERT_NEAR(p.y, want_y, tol) << "control " << control + k;
+      ASSERT_NEAR(wrap(p.theta - static_cast<double>(std::atan2(sn, c))), 0.0, 1e-10);
+      ++checked;
+    }
+    control += start.controls.size();
+  }
+  EXPECT_EQ(control, got.size());
+  EXPECT_GT(checked, got.size() / 2);
 }
 
 // ---- 3. Queue independence ----------------------------------------------------------------------

@@ -270,6 +270,13 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "heading cannot turn while the vehicle stands")
       ->check(CLI::IsMember(motion_choices()))
       ->capture_default_str();
+  cmd.add_option("--motion-draw", w.motion_draw,
+                 "FastSLAM 1.0 with odometry: control draws each particle's motion at every "
+                 "control (the paper's); composed draws it once per run of controls between "
+                 "scans from the run's first-order Gaussian, several times faster "
+                 "(docs/engine-config.md, \"The motion draw\")")
+      ->check(CLI::IsMember(engine::enum_names<engine::MotionDraw>()))
+      ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")
       ->check(whole_number<std::uint32_t>())
       ->check(CLI::Range(1U, 100'000'000U))
@@ -441,6 +448,7 @@ void finish_run_options(const CLI::App& cmd, const RunWords& w, RunOptions& o) {
   o.filter.algorithm = engine::parse_enum<Algorithm>(w.algorithm);
   o.filter.resample.when = engine::parse_enum<ResamplePolicy::When>(w.resample);
   o.filter.resample.scheme = engine::parse_enum<ResampleScheme>(w.scheme);
+  o.filter.motion_draw = engine::parse_enum<engine::MotionDraw>(w.motion_draw);
   auto given = [&](const char* name) {
     const CLI::Option* option = cmd.get_option_no_throw(name);
     return option != nullptr && option->count() > 0;

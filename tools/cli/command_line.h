@@ -33,6 +33,7 @@ struct RunWords {
   std::string algorithm{engine::enum_name(engine::FilterConfig{}.algorithm)};
   std::string resample{engine::enum_name(engine::FilterConfig{}.resample.when)};
   std::string scheme{engine::enum_name(engine::FilterConfig{}.resample.scheme)};
+  std::string motion_draw{engine::enum_name(engine::FilterConfig{}.motion_draw)};
   double sigma_range = 0, sigma_bearing = 0, sigma_control0 = 0, sigma_control1 = 0;
   double max_range = 0, field_of_view_deg = 0;
   double clutter_density = 0, detection_probability = 0;  // the filter's (ml, das)
