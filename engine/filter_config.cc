@@ -62,9 +62,9 @@ void validate(const FilterConfig& c) {
   require(enum_known(c.resample.scheme), "resample.scheme is not a known scheme");
   require(enum_known(c.motion_draw), "motion_draw is not a known draw");
   if (c.motion_draw == MotionDraw::kComposed) {
-    require(c.algorithm == Algorithm::kFastSlam1,
-            "motion_draw 'composed' is FastSLAM 1.0's (2.0 and the EKF carry the motion's "
-            "covariance already); use 'control'");
+    require(c.algorithm != Algorithm::kEkf,
+            "motion_draw 'composed' is FastSLAM's (the EKF predicts its state control by "
+            "control); use 'control'");
     require(c.motion.kind == MotionKind::kBaileyCar || c.motion.kind == MotionKind::kUnicycle ||
                 c.motion.kind == MotionKind::kAckermann,
             std::string("motion_draw 'composed' needs an odometry model, not '") +

@@ -97,9 +97,10 @@ struct ExistenceConfig {
   double range_margin = 1.0;  // m, >= 0
 };
 
-// How FastSLAM 1.0 moves its particles between scans: one draw per control (the paper's
-// s_t ~ p(s_t | u_t, s_t-1) at every control), or one draw per run of queued controls from the
-// run's first-order Gaussian (engine/motion_run.h; odometry models only).
+// How FastSLAM moves its particles between scans: control by control (1.0 draws at every
+// control, 2.0 predicts its prior's mean and covariance at every control), or once per run of
+// queued controls (engine/motion_run.h; odometry models only): 1.0 draws from the run's
+// first-order Gaussian, 2.0's prior is the same up to rounding.
 enum class MotionDraw : std::uint8_t {
   kEveryControl,  // 0: the bytes of a saved state written before the field existed
   kComposed,
@@ -177,7 +178,7 @@ struct FilterConfig {
   // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
   // store per particle per control and a reduction per control).
   bool record_trajectory = false;
-  // FastSLAM 1.0 with an odometry model only (validate refuses the rest). In the padding after
+  // FastSLAM with an odometry model only (validate refuses the rest). In the padding after
   // record_trajectory, so that a saved state's later fields keep their offsets.
   MotionDraw motion_draw = MotionDraw::kEveryControl;
   EkfConfig ekf;  // Algorithm::kEkf only

@@ -69,18 +69,21 @@ def cases(opts, scratch):
         sys.exit(77)
     out = []
     for m in opts.particles:
-        for t in opts.threads:
+        for t, draw in ((t, d) for t in opts.threads for d in opts.motion_draws):
+            # The draw per control is the default: its command names no --motion-draw.
+            what = "" if draw == "control" else f", --motion-draw {draw}"
             run = [fastslam, "run", *world, "--particles", str(m), "--threads", str(t),
-                   "--no-progress"]
-            out_dir = os.path.join(scratch, f"out-{m}-{t}")
-            out.append((f"fastslam run --out, {t} thread{'s' if t > 1 else ''}", m,
+                   "--no-progress"] + ([] if draw == "control" else ["--motion-draw", draw])
+            threads = f"{t} thread{'s' if t > 1 else ''}"
+            out_dir = os.path.join(scratch, f"out-{m}-{t}-{draw}")
+            out.append((f"fastslam run --out{what}, {threads}", m,
                         run + ["--no-plot", "--out", out_dir], out_dir))
-            out.append((f"fastslam run (no --out), {t} thread{'s' if t > 1 else ''}", m,
-                        run + ["--no-plot"], None))
+            out.append((f"fastslam run (no --out){what}, {threads}", m, run + ["--no-plot"],
+                        None))
             if opts.picture:
-                pic_dir = os.path.join(scratch, f"pic-{m}-{t}")
-                out.append((f"fastslam run --out with its picture, {t} "
-                            f"thread{'s' if t > 1 else ''}", m, run + ["--out", pic_dir], None))
+                pic_dir = os.path.join(scratch, f"pic-{m}-{t}-{draw}")
+                out.append((f"fastslam run --out with its picture{what}, {threads}", m,
+                            run + ["--out", pic_dir], None))
         if opts.fasterslam:
             exe = os.path.join(opts.fasterslam, "build", "fastslam1", "FasterSlamExe")
             data = os.path.join(opts.fasterslam, "input_data", "example_webmap.mat")
@@ -100,6 +103,8 @@ def main():
     parser.add_argument("--fasterslam", help="FasterSLAM's src/ folder, built (see above)")
     parser.add_argument("--particles", default="100,1000", help="comma-separated M")
     parser.add_argument("--threads", default="1", help="comma-separated thread counts")
+    parser.add_argument("--motion-draws", default="control",
+                        help="comma-separated --motion-draw values to time (control, composed)")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--picture", action="store_true",
                         help="also time the command with its default picture")
@@ -107,6 +112,7 @@ def main():
     opts = parser.parse_args()
     opts.particles = [int(m) for m in opts.particles.split(",")]
     opts.threads = [int(t) for t in opts.threads.split(",")]
+    opts.motion_draws = [d for d in opts.motion_draws.split(",") if d]
     if opts.rounds < 1:
         sys.exit("peers.py: --rounds must be at least 1")
     scratch = tempfile.mkdtemp(prefix="fastslam-peers-")

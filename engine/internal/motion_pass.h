@@ -77,10 +77,13 @@ inline void draw_motion_normals(const MotionInput& in, std::span<const std::uint
   }
 }
 
-// The composed draw on lanes [0, lanes) of (x, y, theta), lane l being particle begin + l.
+// The composed motion on lanes [0, lanes) of (x, y, theta), lane l being particle begin + l:
+// FastSLAM 1.0 draws each run (three normals per lane), 2.0 (`cov`, the six upper-triangle
+// columns; null for 1.0) carries its mean and covariance through it.
 inline void advance_composed(const MotionInput& in, std::size_t begin, std::size_t lanes, double* x,
-                             double* y, double* theta, const TrajectorySums* record,
-                             const double* w, MotionScratch& scratch) {
+                             double* y, double* theta, double* const* cov,
+                             const TrajectorySums* record, const double* w,
+                             MotionScratch& scratch) {
   double* const n0 = scratch.columns.data() + 3 * lanes;
   double* const n1 = n0 + lanes;
   double* const n2 = n1 + lanes;
@@ -95,13 +98,18 @@ inline void advance_composed(const MotionInput& in, std::size_t begin, std::size
         record->add_displaced(k, begin, lanes, scratch.base.data(), in.partial[k].data());
       }
     }
-    const std::uint64_t key = in.pending[last].step;
-    parallel::normal_pairs_for_particles(in.seed, key, parallel::Purpose::kMotionRun, first,
-                                         lanes, std::span(n0, lanes), std::span(n1, lanes));
-    parallel::normal_pairs_for_particles(in.seed, key, parallel::Purpose::kMotionRunHeading,
-                                         first, lanes, std::span(n2, lanes),
-                                         std::span(spare, lanes));
-    apply_run(run, lanes, x, y, theta, n0, n1, n2);
+    if (cov != nullptr) {
+      predict_run_covariance(run, lanes, theta, cov);
+      apply_run_mean(run, lanes, x, y, theta);
+    } else {
+      const std::uint64_t key = in.pending[last].step;
+      parallel::normal_pairs_for_particles(in.seed, key, parallel::Purpose::kMotionRun, first,
+                                           lanes, std::span(n0, lanes), std::span(n1, lanes));
+      parallel::normal_pairs_for_particles(in.seed, key, parallel::Purpose::kMotionRunHeading,
+                                           first, lanes, std::span(n2, lanes),
+                                           std::span(spare, lanes));
+      apply_run(run, lanes, x, y, theta, n0, n1, n2);
+    }
     if (record != nullptr) record->add(last, begin, lanes, x, y, theta, w);
   }
 }
@@ -121,7 +129,7 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
   const std::size_t lanes = padded_lanes(count);
   const std::size_t k_steps = in.pending.size();
   bool composed = false;
-  if constexpr (!kFs2 && kComposable<Motion>) composed = !in.runs.empty();
+  if constexpr (kComposable<Motion>) composed = !in.runs.empty();
   // Columns: N states, then (2.0) E covariance entries, (1.0) two normals per step of a batch,
   // or (composed) four normal columns.
   const std::size_t columns =
@@ -155,11 +163,13 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
     scratch.weights.resize(lanes);
     record->weights(begin, lanes, scratch.weights.data());
   }
-  if constexpr (!kFs2 && kComposable<Motion>) {
+  if constexpr (kComposable<Motion>) {
     if (composed) {
       motion_pass_detail::advance_composed(in, begin, lanes, block.col[0], block.col[1],
-                                           block.col[2], record, scratch.weights.data(), scratch);
+                                           block.col[2], kFs2 ? cov.data() : nullptr, record,
+                                           scratch.weights.data(), scratch);
       for (int k = 0; k < N; ++k) std::copy_n(block.col[k], count, store_col[k] + begin);
+      if constexpr (kFs2) covariances.store_upper<N>(begin, count, cov.data());
       return;
     }
   }

@@ -143,7 +143,7 @@ class ParticlePass final : public Pass {
   // otherwise). Returns whether the draw is composed.
   bool compose() {
     runs_.clear();
-    if constexpr (!kFs2 && kComposable<Motion>) {
+    if constexpr (kComposable<Motion>) {
       if (s_.config.motion_draw != MotionDraw::kComposed) return false;
       steps_.clear();
       for (const PendingControl& c : s_.pending) steps_.push_back({c.u0, c.u1, c.dt});

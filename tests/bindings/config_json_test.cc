@@ -354,8 +354,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{R"({"existence": {"range_margin": -1}})", "existence.range_margin"},
         BadCase{R"({"gating": {"search_scale": 0.5}})", "gating.search_scale"},
         BadCase{R"({"motion_draw": "once"})", R"("motion_draw": unknown motion draw 'once')"},
-        BadCase{R"({"algorithm": "fastslam2", "motion_draw": "composed"})",
-                "config: motion_draw 'composed' is FastSLAM 1.0's"}));
+        BadCase{R"({"algorithm": "ekf", "motion_draw": "composed"})",
+                "config: motion_draw 'composed' is FastSLAM's"}));
 
 TEST(ConfigJson, WritingRefusesWhatJsonCannotHold) {
   FilterConfig c;

@@ -1,7 +1,8 @@
 // Tests of engine/motion_run.h: each odometry model is equivariant under rigid motions (what
 // lets a run be composed once for every particle); a run's mean and covariance against a Monte
 // Carlo of the draw per control (the oracle) with sound statistical bounds; the rule that ends
-// runs; apply_run against the scalar composition s (+) d.
+// runs; apply_run against the scalar composition s (+) d; FastSLAM 2.0's prior over a run
+// against the prediction control by control.
 #include "engine/motion_run.h"
 
 #include <cmath>
@@ -184,6 +185,72 @@ TEST(MotionRun, ApplyRunIsTheComposition) {
     EXPECT_NEAR(theta[l], want[2], 1e-12);
     EXPECT_GT(theta[l], -std::numbers::pi);
     EXPECT_LE(theta[l], std::numbers::pi);
+  }
+}
+
+// FastSLAM 2.0's prior over a run against the prediction control by control in the world frame
+// (mean by predict, covariance by J P J^T + V M V^T at the particle's own mean path), from
+// random start poses and covariances: equal up to rounding.
+TEST(MotionRun, PredictRunIsThePredictionControlByControl) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> ang(-std::numbers::pi, std::numbers::pi);
+  for (const Case& c : kCases) {
+    with_model(c.kind, [&](const auto& model) {
+      using Model = std::decay_t<decltype(model)>;
+      const typename Model::Control sigmas(c.sigma0, c.sigma1);
+      const typename Model::ControlCovariance m = Model::control_covariance(sigmas);
+      std::vector<ControlStep> steps;
+      for (std::size_t k = 0; k < c.controls; ++k) {
+        steps.push_back({c.u0 * (1 + 0.2 * normal(rng)), c.u1 * (1 + 0.2 * normal(rng)), c.dt});
+      }
+      std::vector<MotionRun> runs;
+      std::vector<Vec3> partial;
+      compose_runs(model, steps, sigmas, runs, partial);
+      ASSERT_EQ(runs.size(), 1U) << c.name;
+      constexpr std::size_t kLanes = 8;
+      double x[kLanes], y[kLanes], theta[kLanes];
+      double cols[6][kLanes];
+      double* p[6] = {cols[0], cols[1], cols[2], cols[3], cols[4], cols[5]};
+      std::vector<Vec3> want_mean(kLanes);
+      std::vector<Eigen::Matrix3d> want_cov(kLanes);
+      for (std::size_t l = 0; l < kLanes; ++l) {
+        Vec3 s(10 * normal(rng), 10 * normal(rng), ang(rng));
+        Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
+        if (l % 2 == 1) {  // half start from a covariance, half from zero (after a scan)
+          for (int i = 0; i < 3; ++i) {
+            for (int j = 0; j < 3; ++j) a(i, j) = 0.1 * normal(rng);
+          }
+        }
+        Eigen::Matrix3d cov = a * a.transpose();
+        x[l] = s[0];
+        y[l] = s[1];
+        theta[l] = s[2];
+        const int index[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+        for (int e = 0; e < 6; ++e) cols[e][l] = cov(index[e][0], index[e][1]);
+        for (const ControlStep& step : steps) {
+          const typename Model::Control u(step.u0, step.u1);
+          const Eigen::Matrix3d j = model.jacobian_pose(s, u, step.dt);
+          cov = j * cov * j.transpose() + model.pose_noise(s, u, step.dt, m);
+          s = model.predict(s, u, step.dt);
+        }
+        want_mean[l] = s;
+        want_cov[l] = cov;
+      }
+      predict_run_covariance(runs[0], kLanes, theta, p);
+      apply_run_mean(runs[0], kLanes, x, y, theta);
+      for (std::size_t l = 0; l < kLanes; ++l) {
+        EXPECT_NEAR(x[l], want_mean[l][0], 1e-12 * (1 + std::abs(x[l]))) << c.name;
+        EXPECT_NEAR(y[l], want_mean[l][1], 1e-12 * (1 + std::abs(y[l]))) << c.name;
+        EXPECT_NEAR(angle_diff(theta[l], want_mean[l][2]), 0.0, 1e-12) << c.name;
+        const int index[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+        const double scale = want_cov[l].cwiseAbs().maxCoeff();
+        for (int e = 0; e < 6; ++e) {
+          EXPECT_NEAR(cols[e][l], want_cov[l](index[e][0], index[e][1]), 1e-12 * scale)
+              << c.name << " lane " << l << " entry " << e;
+        }
+      }
+    });
   }
 }
 
