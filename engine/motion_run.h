@@ -115,6 +115,18 @@ void compose_runs(const Model& model, std::span<const ControlStep> steps,
   return a - ((a > kPi ? 2 * kPi : 0.0) - (a <= -kPi ? 2 * kPi : 0.0));
 }
 
+// One lane's s <- s (+) (dx, dy, dt), the heading wrapped (|theta| <= pi, |dt| < pi).
+[[gnu::always_inline]] inline void move_lane(double dx, double dy, double dt, double& x, double& y,
+                                             double& theta) noexcept {
+  using parallel::madd;
+  double c = 0.0;
+  double s = 0.0;
+  parallel::sincos(theta, c, s);
+  x = madd(c, dx, madd(-s, dy, x));
+  y = madd(s, dx, madd(c, dy, y));
+  theta = wrap_once(theta + dt);
+}
+
 // Moves lanes [0, lanes) of (x, y, theta) by one run: s <- s (+) (run.mean + run.factor n) with
 // n = (n0[l], n1[l], n2[l]); the heading wrapped to (-pi, pi]. REQUIRES: |theta| <= pi and
 // |run.mean[2] + the drawn heading noise| < pi (a run's heading spread is bounded above).
@@ -131,12 +143,7 @@ inline void apply_run(const MotionRun& run, std::size_t lanes, double* __restric
     const double dx = madd(f02, n2[l], madd(f01, n1[l], madd(f00, n0[l], mx)));
     const double dy = madd(f12, n2[l], madd(f11, n1[l], madd(f10, n0[l], my)));
     const double dt = madd(f22, n2[l], madd(f21, n1[l], madd(f20, n0[l], mt)));
-    double c = 0.0;
-    double s = 0.0;
-    parallel::sincos(theta[l], c, s);
-    x[l] = madd(c, dx, madd(-s, dy, x[l]));
-    y[l] = madd(s, dx, madd(c, dy, y[l]));
-    theta[l] = wrap_once(theta[l] + dt);
+    move_lane(dx, dy, dt, x[l], y[l], theta[l]);
   }
 }
 
@@ -200,16 +207,8 @@ inline void predict_run_covariance(const MotionRun& run, std::size_t lanes, cons
 // FastSLAM 2.0's mean over one run: s <- s (+) run.mean, lanes [0, lanes).
 inline void apply_run_mean(const MotionRun& run, std::size_t lanes, double* __restrict x,
                            double* __restrict y, double* __restrict theta) noexcept {
-  using parallel::madd;
   const double mx = run.mean[0], my = run.mean[1], mt = run.mean[2];
-  for (std::size_t l = 0; l < lanes; ++l) {
-    double c = 0.0;
-    double s = 0.0;
-    parallel::sincos(theta[l], c, s);
-    x[l] = madd(c, mx, madd(-s, my, x[l]));
-    y[l] = madd(s, mx, madd(c, my, y[l]));
-    theta[l] = wrap_once(theta[l] + mt);
-  }
+  for (std::size_t l = 0; l < lanes; ++l) move_lane(mx, my, mt, x[l], y[l], theta[l]);
 }
 
 }  // namespace fastslam::engine

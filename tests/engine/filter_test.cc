@@ -248,15 +248,20 @@ struct RunResult {
   std::uint64_t resamples = 0;
 };
 
-RunResult run_scenario(const FilterConfig& config, const Scenario& s) {
+// A filter of `config` fed `events`: its trajectory, estimate, particles and resamplings.
+RunResult run_events(const FilterConfig& config, const std::vector<Event>& events) {
   Filter filter(config);
-  feed(filter, s.events, 0, s.events.size());
+  feed(filter, events, 0, events.size());
   RunResult r;
   r.trajectory = filter.take_trajectory();
   r.estimate = filter.estimate();
   r.particles = snapshot(filter);
   r.resamples = filter.statistics().resamples;
   return r;
+}
+
+RunResult run_scenario(const FilterConfig& config, const Scenario& s) {
+  return run_events(config, s.events);
 }
 
 TEST_P(FilterDeterminismTest, BitIdenticalForAnyThreadCountAndGrain) {
@@ -309,11 +314,10 @@ std::string determinism_case_name(const ::testing::TestParamInfo<DeterminismCase
 INSTANTIATE_TEST_SUITE_P(AllSchemes, FilterDeterminismTest, ::testing::ValuesIn(kDeterminismCases),
                          determinism_case_name);
 
-// Every motion model through the filter's vectorised control loop (engine/motion_batch.h):
-// bit-identical for any thread count and grain, and whether the trajectory is recorded (one
-// control per kernel call) or not (every queued control in one call, in batches of 64 steps:
-// the events queue 150 controls before one scan).
-TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording) {
+// The loop scenario's first 300 events with 150 of its controls inserted before its 101st event,
+// so that one pass queues 150 controls (the motion stage's batches of 64, the composed motion's
+// runs of 64).
+std::vector<Event> queued_events() {
   const Scenario& s = loop_scenario();
   std::vector<Event> events(s.events.begin(), s.events.begin() + 100);
   for (std::size_t k = 0, added = 0; added < 150; ++k) {
@@ -323,63 +327,63 @@ TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording
     }
   }
   events.insert(events.end(), s.events.begin() + 100, s.events.begin() + 300);
+  return events;
+}
+
+// Every motion model through the filter's vectorised control loop (engine/motion_batch.h) and,
+// for the odometry models, the composed motion (engine/motion_run.h): bit-identical for any
+// thread count and grain, and whether the trajectory is recorded (one control per kernel call)
+// or not (every queued control in one call, in batches of 64 steps: the events queue 150
+// controls before one scan).
+TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording) {
+  const std::vector<Event> events = queued_events();
   const auto controls = static_cast<std::size_t>(
       std::count_if(events.begin(), events.end(), [](const Event& e) { return !e.is_scan; }));
   for (const MotionKind kind :
        {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kAckermann,
         MotionKind::kBrownian, MotionKind::kBrownianCurvature}) {
+    const bool odometry = kind != MotionKind::kBrownian && kind != MotionKind::kBrownianCurvature;
     for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
-      SCOPED_TRACE("motion " + std::to_string(static_cast<int>(kind)) + ", " +
-                   std::string(to_string(algorithm)));
-      FilterConfig config = base_config(algorithm, kSanitized ? 20 : 45);
-      config.motion.kind = kind;
-      config.grain = 16;
-      auto run = [&](const FilterConfig& c) {
-        Filter filter(c);
-        feed(filter, events, 0, events.size());
-        RunResult r;
-        r.trajectory = filter.take_trajectory();
-        r.estimate = filter.estimate();
-        r.particles = snapshot(filter);
-        return r;
-      };
-      const RunResult reference = run(config);
-      const std::tuple<unsigned, std::size_t, bool> layouts[] = {
-          {2, 1, false}, {2, 5, false}, {1, 1000, true}, {2, 16, true}};
-      for (const auto& [threads, grain, record] : layouts) {
-        SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain) +
-                     (record ? ", recorded" : ""));
-        FilterConfig c = config;
-        c.threads = threads;
-        c.grain = grain;
-        c.record_trajectory = record;
-        const RunResult r = run(c);
-        EXPECT_TRUE(identical(r.particles, reference.particles));
-        EXPECT_TRUE(identical(r.estimate, reference.estimate));
-        EXPECT_EQ(r.trajectory.size(), record ? controls : 0u);
+      for (const MotionDraw draw : {MotionDraw::kEveryControl, MotionDraw::kComposed}) {
+        if (draw == MotionDraw::kComposed && !odometry) continue;
+        SCOPED_TRACE("motion " + std::string(to_string(kind)) + ", " +
+                     std::string(to_string(algorithm)) + ", " + std::string(to_string(draw)));
+        FilterConfig config = base_config(algorithm, kSanitized ? 20 : 45);
+        config.motion.kind = kind;
+        config.motion_draw = draw;
+        config.grain = 16;
+        const RunResult reference = run_events(config, events);
+        std::vector<TrajectoryPoint> recorded;
+        const std::tuple<unsigned, std::size_t, bool> layouts[] = {
+            {2, 1, false}, {2, 5, false}, {1, 1000, true}, {2, 16, true}};
+        for (const auto& [threads, grain, record] : layouts) {
+          SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " +
+                       std::to_string(grain) + (record ? ", recorded" : ""));
+          FilterConfig c = config;
+          c.threads = threads;
+          c.grain = grain;
+          c.record_trajectory = record;
+          const RunResult r = run_events(c, events);
+          EXPECT_TRUE(identical(r.particles, reference.particles));
+          EXPECT_TRUE(identical(r.estimate, reference.estimate));
+          EXPECT_EQ(r.trajectory.size(), record ? controls : 0u);
+          if (record) {
+            if (recorded.empty()) recorded = r.trajectory;
+            EXPECT_TRUE(identical(r.trajectory, recorded));
+          }
+        }
       }
     }
   }
 }
 
 // The composed motion (engine/motion_run.h) through the filter, for each odometry model and both
-// algorithms: bit-identical for any thread count and grain, recorded or not, and across a save
-// and load between scans (the queue is saved, not drained); runs of 64 controls inside one pass
-// (the events queue 150 controls before a scan). FastSLAM 1.0's draws differ from the draw per
-// control's; 2.0's prior is the prediction control by control's up to rounding, so its
-// particles stay within 1e-9 of it.
-TEST(FilterComposedDrawTest, BitIdenticalForAnyLayoutRecordingAndSaveLoad) {
-  const Scenario& s = loop_scenario();
-  std::vector<Event> events(s.events.begin(), s.events.begin() + 100);
-  for (std::size_t k = 0, added = 0; added < 150; ++k) {
-    if (!s.events[k].is_scan) {
-      events.push_back(s.events[k]);
-      ++added;
-    }
-  }
-  events.insert(events.end(), s.events.begin() + 100, s.events.begin() + 300);
-  const auto controls = static_cast<std::size_t>(
-      std::count_if(events.begin(), events.end(), [](const Event& e) { return !e.is_scan; }));
+// algorithms (FilterDeterminismMotionTest covers thread counts, grains and recording): a save
+// and load between scans continues bit for bit (the queue is saved, not drained). FastSLAM
+// 1.0's draws differ from the draw per control's; 2.0's prior is the prediction control by
+// control's up to rounding, so its particles stay within 1e-9 of it.
+TEST(FilterComposedDrawTest, SaveLoadContinuesAndFastSlam2EqualsTheStepwisePrior) {
+  const std::vector<Event> events = queued_events();
   for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
     for (const MotionKind kind :
          {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kAckermann}) {
@@ -389,35 +393,7 @@ TEST(FilterComposedDrawTest, BitIdenticalForAnyLayoutRecordingAndSaveLoad) {
       config.motion.kind = kind;
       config.motion_draw = MotionDraw::kComposed;
       config.grain = 16;
-      auto run = [&](const FilterConfig& c) {
-        Filter filter(c);
-        feed(filter, events, 0, events.size());
-        RunResult r;
-        r.trajectory = filter.take_trajectory();
-        r.estimate = filter.estimate();
-        r.particles = snapshot(filter);
-        return r;
-      };
-      const RunResult reference = run(config);
-      std::vector<TrajectoryPoint> recorded;
-      const std::tuple<unsigned, std::size_t, bool> layouts[] = {
-          {2, 1, false}, {2, 5, false}, {1, 1000, true}, {2, 16, true}};
-      for (const auto& [threads, grain, record] : layouts) {
-        SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain) +
-                     (record ? ", recorded" : ""));
-        FilterConfig c = config;
-        c.threads = threads;
-        c.grain = grain;
-        c.record_trajectory = record;
-        const RunResult r = run(c);
-        EXPECT_TRUE(identical(r.particles, reference.particles));
-        EXPECT_TRUE(identical(r.estimate, reference.estimate));
-        if (record) {
-          if (recorded.empty()) recorded = r.trajectory;
-          EXPECT_TRUE(identical(r.trajectory, recorded));
-          EXPECT_EQ(r.trajectory.size(), controls);
-        }
-      }
+      const RunResult reference = run_events(config, events);
       // Saved with controls queued (mid-way through the 150), loaded, continued.
       {
         Filter first(config);
@@ -430,12 +406,12 @@ TEST(FilterComposedDrawTest, BitIdenticalForAnyLayoutRecordingAndSaveLoad) {
       }
       FilterConfig per_control = config;
       per_control.motion_draw = MotionDraw::kEveryControl;
-      const RunResult stepwise = run(per_control);
+      const RunResult stepwise = run_events(per_control, events);
       if (algorithm == Algorithm::kFastSlam1) {
         EXPECT_FALSE(identical(stepwise.particles, reference.particles));
         FilterConfig other = config;
         other.seed += 1;
-        EXPECT_FALSE(identical(run(other).particles, reference.particles));
+        EXPECT_FALSE(identical(run_events(other, events).particles, reference.particles));
       } else {
         for (int k = 0; k < 3; ++k) {
           const std::vector<double>& a = stepwise.particles.columns[k];
