@@ -131,21 +131,39 @@ TEST(RunCommand, RefusesBadOptionsClearly) {
   EXPECT_THROW(run_simulation(o), std::invalid_argument);
 }
 
-TEST(RunCommand, SmallGridRunsWithBothAlgorithms) {
+TEST(RunCommand, SmallGridRunsWithBothAlgorithmsAndBothMotionDraws) {
   for (auto algorithm : {engine::Algorithm::kFastSlam1, engine::Algorithm::kFastSlam2}) {
-    RunOptions o;
-    o.progress = false;
-    o.landmarks = 400;
-    o.filter.algorithm = algorithm;
-    o.filter.particles = 20;
-    o.sim.loops = 1;
-    o.out = temp_path("run_grid");
-    ASSERT_EQ(run_simulation(o), 0);
-    std::ifstream in(o.out + "/metrics.json");
-    const nlohmann::json m = nlohmann::json::parse(in);
-    EXPECT_GT(m["landmarks"].get<int>(), 300);
-    EXPECT_LT(m["pose_rmse_m"].get<double>(), 20.0);
-    std::filesystem::remove_all(o.out);
+    for (auto draw : {engine::MotionDraw::kEveryControl, engine::MotionDraw::kComposed}) {
+      SCOPED_TRACE(std::string(engine::to_string(algorithm)) + ", " +
+                   std::string(engine::to_string(draw)));
+      RunOptions o;
+      o.progress = false;
+      o.landmarks = 400;
+      o.filter.algorithm = algorithm;
+      o.filter.motion_draw = draw;
+      o.filter.particles = 20;
+      o.sim.loops = 1;
+      o.out = temp_path("run_grid");
+      ASSERT_EQ(run_simulation(o), 0);
+      std::ifstream in(o.out + "/metrics.json");
+      const nlohmann::json m = nlohmann::json::parse(in);
+      EXPECT_GT(m["landmarks"].get<int>(), 300);
+      EXPECT_LT(m["pose_rmse_m"].get<double>(), 20.0);
+      EXPECT_EQ(m["options"]["motion-draw"], std::string(engine::to_string(draw)));
+      std::filesystem::remove_all(o.out);
+    }
+  }
+  // The EKF predicts control by control: a composed motion is refused before the run, by name.
+  RunOptions o;
+  o.progress = false;
+  o.landmarks = 400;
+  o.filter.algorithm = engine::Algorithm::kEkf;
+  o.filter.motion_draw = engine::MotionDraw::kComposed;
+  try {
+    run_simulation(o);
+    ADD_FAILURE() << "the EKF ran with a composed motion";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("motion_draw 'composed'"), std::string::npos) << e.what();
   }
 }
 
