@@ -101,8 +101,7 @@ void compose_runs(const Model& model, std::span<const ControlStep> steps,
     rel = model.predict(rel, u, dt);
     partial[k] = rel;
     ++run.count;
-    if (run.count == kRunMaxControls || cov(2, 2) >= kRunHeadingVariance ||
-        k + 1 == steps.size()) {
+    if (run.count == kRunMaxControls || cov(2, 2) >= kRunHeadingVariance || k + 1 == steps.size()) {
       close();
       run = MotionRun{};
     }

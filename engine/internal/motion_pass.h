@@ -4,10 +4,10 @@
 // control by the vectorised kernels of engine/motion_batch.h (1.0: sample_block with the keyed
 // motion normals, taken from the ahead window where it holds them; 2.0: predict_block), and
 // copied back. When the trajectory is recorded it adds the block's weighted sums after every
-// control (TrajectorySums::add). Under the composed draw (FastSLAM 1.0, odometry models) the
-// pass's runs (engine/motion_run.h, composed once per pass) move each lane once per run, by
-// three normals of stream (seed, the run's last step, particle, kMotionRun and
-// kMotionRunHeading), and the points inside a run come from the run's start sums.
+// control (TrajectorySums::add). Under the composed motion (odometry models) the pass's runs
+// (engine/motion_run.h, composed once per pass) move each lane once per run: 1.0 by three
+// normals of stream (seed, the run's last step, particle, kMotionRun and kMotionRunHeading),
+// 2.0 by the run's mean and covariance; the points inside a run come from its start's sums.
 // Thread safety: concurrent calls on disjoint blocks with distinct scratch are safe. Costs:
 // O(count K) for K queued controls; no allocation once the scratch has grown.
 #pragma once
@@ -35,7 +35,7 @@ struct MotionScratch {
   std::vector<double> weights;  // the block's lanes' weights while recording the trajectory
   std::vector<ControlStep> steps;
   std::vector<std::uint64_t> keys;
-  std::vector<double> base;  // the composed draw's group sums at a run's start
+  std::vector<double> base;  // the composed motion's group sums at a run's start
 };
 
 // What the motion stage reads besides the particles.
@@ -47,13 +47,13 @@ struct MotionInput {
   std::uint32_t first_particle = 0;
   double sigma_control[2] = {0.0, 0.0};
   const MotionNormalsWindow* ahead = nullptr;  // FastSLAM 1.0: normals drawn ahead (may be empty)
-  // The composed draw's runs of `pending` and each control's mean displacement from its run's
+  // The composed motion's runs of `pending` and each control's mean displacement from its run's
   // start (engine/motion_run.h); empty under the draw per control.
   std::span<const MotionRun> runs;
   std::span<const Eigen::Vector3d> partial;
 };
 
-// Whether a model can take the composed draw (engine/motion_run.h).
+// Whether a model can take the composed motion (engine/motion_run.h).
 template <class Motion>
 inline constexpr bool kComposable = Motion::kStateDim == 3 && !Motion::kNoOdometry;
 
@@ -84,6 +84,7 @@ inline void advance_composed(const MotionInput& in, std::size_t begin, std::size
                              double* y, double* theta, double* const* cov,
                              const TrajectorySums* record, const double* w,
                              MotionScratch& scratch) {
+  // FastSLAM 1.0's normals: the four columns after the states.
   double* const n0 = scratch.columns.data() + 3 * lanes;
   double* const n1 = n0 + lanes;
   double* const n2 = n1 + lanes;
@@ -131,7 +132,7 @@ void advance_block(const Motion& motion, const MotionInput& in, memory::Particle
   bool composed = false;
   if constexpr (kComposable<Motion>) composed = !in.runs.empty();
   // Columns: N states, then (2.0) E covariance entries, (1.0) two normals per step of a batch,
-  // or (composed) four normal columns.
+  // or (1.0 composed) four normal columns.
   const std::size_t columns =
       N + (kFs2 ? E : (composed ? 4 : 2 * std::min(k_steps, kStepBatch)));
   scratch.columns.resize(columns * lanes);

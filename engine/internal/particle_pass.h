@@ -113,8 +113,8 @@ class ParticlePass final : public Pass {
     const PassBlocks blocks(m, kernel_.threads(), s_.config.grain, heavy_);
     const bool composed = compose();
     if constexpr (!kFs2) {
-      if (!composed && blocks.tasks == 1 && kernel_.threads() > 1 && m <= MotionNormalsAhead::kMaxParticles &&
-          scan != nullptr) {
+      if (!composed && blocks.tasks == 1 && kernel_.threads() > 1 &&
+          m <= MotionNormalsAhead::kMaxParticles && scan != nullptr) {
         ahead_.start_next(scan_step, queued, m);
       }
     }
@@ -139,8 +139,8 @@ class ParticlePass final : public Pass {
     s_.pending.clear();
   }
 
-  // Under the composed motion draw, the runs of the queued controls (runs_ stays empty
-  // otherwise). Returns whether the draw is composed.
+  // Under the composed motion, the runs of the queued controls (runs_ stays empty otherwise).
+  // Returns whether the motion is composed.
   bool compose() {
     runs_.clear();
     if constexpr (kComposable<Motion>) {
@@ -319,7 +319,7 @@ class ParticlePass final : public Pass {
   // This scan's "no landmark" scores (score_unassociated); every block reads them.
   std::vector<double> log_unassociated_;
   std::vector<Eigen::Vector2d> bearings_;  // the scan's, for the candidate search
-  // The composed motion draw's runs of the pass's controls (engine/motion_run.h).
+  // The composed motion's runs of the pass's controls (engine/motion_run.h).
   std::vector<ControlStep> steps_;
   std::vector<MotionRun> runs_;
   std::vector<Eigen::Vector3d> partial_;

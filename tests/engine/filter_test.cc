@@ -357,8 +357,8 @@ TEST(FilterDeterminismMotionTest, EveryModelBitIdenticalForAnyLayoutAndRecording
         const std::tuple<unsigned, std::size_t, bool> layouts[] = {
             {2, 1, false}, {2, 5, false}, {1, 1000, true}, {2, 16, true}};
         for (const auto& [threads, grain, record] : layouts) {
-          SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " +
-                       std::to_string(grain) + (record ? ", recorded" : ""));
+          SCOPED_TRACE("threads " + std::to_string(threads) + ", grain " + std::to_string(grain) +
+                       (record ? ", recorded" : ""));
           FilterConfig c = config;
           c.threads = threads;
           c.grain = grain;
@@ -387,8 +387,7 @@ TEST(FilterComposedDrawTest, SaveLoadContinuesAndFastSlam2EqualsTheStepwisePrior
   for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
     for (const MotionKind kind :
          {MotionKind::kBaileyCar, MotionKind::kUnicycle, MotionKind::kAckermann}) {
-      SCOPED_TRACE(std::string(to_string(algorithm)) + ", motion " +
-                   std::string(to_string(kind)));
+      SCOPED_TRACE(std::string(to_string(algorithm)) + ", motion " + std::string(to_string(kind)));
       FilterConfig config = base_config(algorithm, kSanitized ? 20 : 45);
       config.motion.kind = kind;
       config.motion_draw = MotionDraw::kComposed;
