@@ -91,12 +91,17 @@ inline void advance_composed(const MotionInput& in, std::size_t begin, std::size
   double* const spare = n2 + lanes;
   const auto first = in.first_particle + static_cast<std::uint32_t>(begin);
   if (record != nullptr) scratch.base.resize(lanes / kMotionLanes * TrajectorySums::kTerms);
+  // The groups' sums at a run's start: the previous run's last point's, once there is one.
+  const double* base = nullptr;
   for (const MotionRun& run : in.runs) {
     const std::size_t last = run.first + run.count - 1;
     if (record != nullptr && run.count > 1) {
-      TrajectorySums::group_sums(lanes, x, y, theta, w, scratch.base.data());
+      if (base == nullptr) {
+        TrajectorySums::group_sums(lanes, x, y, theta, w, scratch.base.data());
+        base = scratch.base.data();
+      }
       for (std::size_t k = run.first; k < last; ++k) {
-        record->add_displaced(k, begin, lanes, scratch.base.data(), in.partial[k].data());
+        record->add_displaced(k, begin, lanes, base, in.partial[k].data());
       }
     }
     if (cov != nullptr) {
@@ -111,7 +116,10 @@ inline void advance_composed(const MotionInput& in, std::size_t begin, std::size
                                            std::span(spare, lanes));
       apply_run(run, lanes, x, y, theta, n0, n1, n2);
     }
-    if (record != nullptr) record->add(last, begin, lanes, x, y, theta, w);
+    if (record != nullptr) {
+      record->add(last, begin, lanes, x, y, theta, w);
+      base = record->sums + (last * record->groups + begin / kMotionLanes) * TrajectorySums::kTerms;
+    }
   }
 }
 
