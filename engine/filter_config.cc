@@ -29,6 +29,12 @@ void validate_ekf(const FilterConfig& c) {
 
 }  // namespace
 
+MotionDraw resolved_motion_draw(const FilterConfig& c) {
+  if (c.motion_draw != MotionDraw::kAuto) return c.motion_draw;
+  return c.algorithm != Algorithm::kEkf && !without_odometry(c.motion.kind) ? MotionDraw::kComposed
+                                                                           : MotionDraw::kEveryControl;
+}
+
 void validate(const FilterConfig& c) {
   require(c.particles >= 1, "particles must be at least 1 (got 0)");
   require(enum_known(c.algorithm), "unknown algorithm");
@@ -65,8 +71,7 @@ void validate(const FilterConfig& c) {
     require(c.algorithm != Algorithm::kEkf,
             "motion_draw 'composed' is FastSLAM's (the EKF predicts its state control by "
             "control); use 'control'");
-    require(c.motion.kind == MotionKind::kBaileyCar || c.motion.kind == MotionKind::kUnicycle ||
-                c.motion.kind == MotionKind::kAckermann,
+    require(!without_odometry(c.motion.kind),
             std::string("motion_draw 'composed' needs an odometry model, not '") +
                 std::string(to_string(c.motion.kind)) + "' (its velocities differ per particle)");
   }

@@ -100,18 +100,21 @@ struct ExistenceConfig {
 // How FastSLAM moves its particles between scans: control by control (1.0 draws at every
 // control, 2.0 predicts its prior's mean and covariance at every control), or once per run of
 // queued controls (engine/motion_run.h; odometry models only): 1.0 draws from the run's
-// first-order Gaussian, 2.0's prior is the same up to rounding.
+// first-order Gaussian, 2.0's prior is the same up to rounding. kAuto composes wherever the
+// motion composes and moves control by control elsewhere (the EKF, the no-odometry walks).
 enum class MotionDraw : std::uint8_t {
   kEveryControl,  // 0: the bytes of a saved state written before the field existed
   kComposed,
+  kAuto,
 };
 
 template <>
 struct EnumNames<MotionDraw> {
   static constexpr std::string_view kWhat = "motion draw";
-  static constexpr std::array<EnumName<MotionDraw>, 2> kNames = {{
+  static constexpr std::array<EnumName<MotionDraw>, 3> kNames = {{
       {MotionDraw::kEveryControl, "control"},
       {MotionDraw::kComposed, "composed"},
+      {MotionDraw::kAuto, "auto"},
   }};
 };
 
@@ -178,9 +181,9 @@ struct FilterConfig {
   // Keep the weighted-mean pose after every control for `Filter::take_trajectory` (costs a
   // store per particle per control and a reduction per control).
   bool record_trajectory = false;
-  // FastSLAM with an odometry model only (validate refuses the rest). In the padding after
-  // record_trajectory, so that a saved state's later fields keep their offsets.
-  MotionDraw motion_draw = MotionDraw::kEveryControl;
+  // kComposed: FastSLAM with an odometry model only (validate refuses the rest). In the padding
+  // after record_trajectory, so that a saved state's later fields keep their offsets.
+  MotionDraw motion_draw = MotionDraw::kAuto;
   EkfConfig ekf;  // Algorithm::kEkf only
   // The initial pose of every particle (x, y, theta; v, omega for kBrownian; v, kappa for
   // kBrownianCurvature).
@@ -192,6 +195,10 @@ struct FilterConfig {
 // Throws std::invalid_argument naming the first unusable field (zero particles, a non-positive
 // or non-finite noise, wheelbase or range, an association the build does not support, ...).
 void validate(const FilterConfig& config);
+
+// The draw a filter of this configuration runs: motion_draw, with kAuto resolved (kComposed for
+// FastSLAM with an odometry model, kEveryControl otherwise).
+MotionDraw resolved_motion_draw(const FilterConfig& config);
 
 // The names of the tables above (metrics.json, log headers, the command line).
 constexpr std::string_view to_string(Algorithm algorithm) { return enum_name(algorithm); }

@@ -144,7 +144,7 @@ class ParticlePass final : public Pass {
   bool compose() {
     runs_.clear();
     if constexpr (kComposable<Motion>) {
-      if (s_.config.motion_draw != MotionDraw::kComposed) return false;
+      if (resolved_motion_draw(s_.config) != MotionDraw::kComposed) return false;
       steps_.clear();
       for (const PendingControl& c : s_.pending) steps_.push_back({c.u0, c.u1, c.dt});
       const typename Motion::Control sigmas(s_.config.motion.sigma_control[0],

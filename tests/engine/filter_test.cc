@@ -426,6 +426,35 @@ TEST(FilterComposedDrawTest, SaveLoadContinuesAndFastSlam2EqualsTheStepwisePrior
   }
 }
 
+// The default draw, kAuto, is the composed motion bit for bit wherever the motion composes
+// (FastSLAM with an odometry model) and the draw per control elsewhere; the EKF and the
+// no-odometry walks validate with it, and config() keeps what was given.
+TEST(FilterComposedDrawTest, AutoComposesWhereTheMotionComposes) {
+  EXPECT_EQ(FilterConfig{}.motion_draw, MotionDraw::kAuto);
+  const std::vector<Event> events = queued_events();
+  for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
+    for (const MotionKind kind : {MotionKind::kBaileyCar, MotionKind::kUnicycle,
+                                  MotionKind::kAckermann, MotionKind::kBrownian}) {
+      SCOPED_TRACE(std::string(to_string(algorithm)) + ", motion " + std::string(to_string(kind)));
+      FilterConfig config = base_config(algorithm, 20);
+      config.motion.kind = kind;
+      config.motion_draw = MotionDraw::kAuto;
+      const MotionDraw want =
+          kind == MotionKind::kBrownian ? MotionDraw::kEveryControl : MotionDraw::kComposed;
+      EXPECT_EQ(resolved_motion_draw(config), want);
+      EXPECT_EQ(Filter(config).config().motion_draw, MotionDraw::kAuto);
+      FilterConfig explicit_draw = config;
+      explicit_draw.motion_draw = want;
+      EXPECT_TRUE(identical(run_events(config, events).particles,
+                            run_events(explicit_draw, events).particles));
+    }
+  }
+  FilterConfig ekf;
+  ekf.algorithm = Algorithm::kEkf;
+  EXPECT_NO_THROW(validate(ekf));
+  EXPECT_EQ(resolved_motion_draw(ekf), MotionDraw::kEveryControl);
+}
+
 // Between scans the recorded trajectory is the weighted mean of each particle moved from the
 // run's start by the run's mean displacement (what TrajectorySums::add_displaced computes
 // without reading a lane), against a brute-force sum over the particles saved after each scan.
@@ -506,6 +535,8 @@ TEST_P(FilterAlgorithmTest, DrainingTheQueueChangesNothing) {
   config.threads = 2;
   config.grain = 8;
   config.record_trajectory = true;
+  // Draining ends a composed run (FilterComposedDrawTest); control by control it changes nothing.
+  config.motion_draw = MotionDraw::kEveryControl;
   Filter plain(config);
   feed(plain, s.events, 0, s.events.size());
   Filter drained(config);
@@ -832,6 +863,7 @@ FilterConfig weight_test_config(Algorithm algorithm) {
   // Resampling off: the log-weights are only normalised after each scan.
   c.resample = {parallel::ResamplePolicy::When::kEssBelowFraction, 0.0,
                 parallel::ResampleScheme::kSystematic};
+  c.motion_draw = MotionDraw::kEveryControl;  // the oracles move each particle control by control
   return c;
 }
 
@@ -1271,6 +1303,7 @@ TEST_P(FilterAlgorithmTest, TrajectoryIsTheWeightedMeanAfterEveryControl) {
   config.grain = 8;
   config.resample.ess_fraction = 0.3;
   config.record_trajectory = true;
+  config.motion_draw = MotionDraw::kEveryControl;  // composed: FilterComposedDrawTest's oracle
   Filter drained(config);
   std::vector<BruteMean> want;
   feed(drained, s.events, 0, s.events.size(), [&](Filter& f, const Event& e) {

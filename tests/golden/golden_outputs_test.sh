@@ -22,32 +22,38 @@ if [ ! -d "$shared/data" ]; then
 fi
 
 EXPECTED='
-webmap_fs1_known/trajectory.csv 4c33374d043eba4f0bc04b4d3d92bab05c999a52177667f6a49cb24b4ad32a56
-webmap_fs1_known/trajectory.tum 6a38fe879a776ca3a9051fbe2188baab011c20a3950e2770dbf65d5d8b84cf8f
-webmap_fs1_known/landmarks.csv fbd4bcd4433a1fb90718043ee6c56d8473b732fa5e299ccb93b63a703a4ca32a
+webmap_fs1_known/trajectory.csv aca7b11a22f356b1b7768f73d9c81b2431e85bd26536e6eeb7cc4d847d8c5cfa
+webmap_fs1_known/trajectory.tum b16a748f7f2c3fe4d6523572ef627fdef9be2731e68285bf2b73c570c3422068
+webmap_fs1_known/landmarks.csv 19c0c52f46b1eea6386b0d1b76c3c47f990108674e52df230acc1436a44a0393
+webmap_fs1_known_control/trajectory.csv 4c33374d043eba4f0bc04b4d3d92bab05c999a52177667f6a49cb24b4ad32a56
+webmap_fs1_known_control/trajectory.tum 6a38fe879a776ca3a9051fbe2188baab011c20a3950e2770dbf65d5d8b84cf8f
+webmap_fs1_known_control/landmarks.csv fbd4bcd4433a1fb90718043ee6c56d8473b732fa5e299ccb93b63a703a4ca32a
 webmap_fs2_known/trajectory.csv 9b52dbd2f0bf875ea43afea195cf583ac21c05789231632aaa215079f54bf918
-webmap_fs2_known/trajectory.tum ce004c501206c9b40cca0b35c5738ec842dedf8194e91ea5b51a337d1eeb9845
+webmap_fs2_known/trajectory.tum 36f21881ebd71a9730304d34f7859edf674a266d84c6e769b387ac3ccc416cea
 webmap_fs2_known/landmarks.csv c446fc3554d52b968a28b51d52e77dc9891422f38d4c51791cfbdc155af2d4f9
-webmap_fs1_ml/trajectory.csv a053862334ac099869a229b628a81647746f43e3e5aaf13a5637f8233d4417af
-webmap_fs1_ml/trajectory.tum f184b734be79ca5c7f97b0f0f4a4dc4175f1bcb93b3e6c64eb150ed23ec8f1a6
-webmap_fs1_ml/landmarks.csv 1d8989e8c97157198e5fc319dd5c4d0615ac124903400192d534a2bd192b10f0
+webmap_fs1_ml/trajectory.csv 0909d9d2013b0693fea25c5839e7c0455152c9f0509960aaf3980b86c509a3c8
+webmap_fs1_ml/trajectory.tum 4fa0c2586e8ecbdef40bb5019cba394a5d1f776ce2336ce2f749fc8fa3fc9822
+webmap_fs1_ml/landmarks.csv 03bd05d56f619ff22adcb289283688669a6f8a285b7c56eb3a3d57eb0b892ac7
 webmap_fs2_das/trajectory.csv a85f1945225ea1220fad459f9d9ba88ac50f7e0d6c36af32ae4e68d88ad2fd1b
-webmap_fs2_das/trajectory.tum 2db2fe8792183e21cee14d4c55624c96ee8d6d404763dc539b8940d9dfda2a7c
+webmap_fs2_das/trajectory.tum 044c4eea00a978a047cc19a5c1a1d2a6242a395b7f5b50ae34afdf9b8280cba3
 webmap_fs2_das/landmarks.csv f541f184b40ecdce55c74f011dc66065d835292fedbb0cb54d00b1af81da8408
 webmap_ekf_ml/trajectory.csv@avx2 419cb225c15413c30bdf246acd828ba3f994f06696659dddcadca818e5cdec4a
-webmap_ekf_ml/trajectory.tum@avx2 5c089734c56a4c2a580030ad77987be6bb64cfd02aa144a8f31f061e716a78bc
 webmap_ekf_ml/trajectory.csv@avx512 37425c36f23c0a87586ddcb608c8dfeba2402521abac63cc3ca3fde6cd16cdf6
+webmap_ekf_ml/trajectory.tum@avx2 5c089734c56a4c2a580030ad77987be6bb64cfd02aa144a8f31f061e716a78bc
 webmap_ekf_ml/trajectory.tum@avx512 be558131fd5147c8c259ba2dc333efbac163c8ab1c7278db33e3583e34c49033
 webmap_ekf_ml/landmarks.csv 44ee0843c45b8696427fa74ede132c549f2077ceb25ce7a4423c42da99042d0a
-loop_fs1_ml_clutter/trajectory.csv 98bb1bf2d3f9f36dcde02a85f6ce83e5a703a26fd763dd116223b63a16cc83ac
-loop_fs1_ml_clutter/trajectory.tum ea8681c15e36c5a7638c81d0ed13253a60c7fd0eef63f241bff5fed3ed1a8711
-loop_fs1_ml_clutter/landmarks.csv e1d1c8577df73ed5b6d8ceb0c3190e3bad368c2b7c52b43ecb4392ff7bfb317d
+loop_fs1_ml_clutter/trajectory.csv 6504b4caed1c1b5b9da5fbc6ddab65d21bfd90f86917ba454914c91f9ea88a1f
+loop_fs1_ml_clutter/trajectory.tum 22f609b34d723f73974f68cf56b8e00eba87272ad50179441b0d150215d32da5
+loop_fs1_ml_clutter/landmarks.csv 30b4a1f5f0ffe4abf5d4797ea840a651adcadb96c464c855937591c5861d59e6
 grid_fs2_known/trajectory.csv 35882f177524c64cbfdca62662a721228e151f55f9d6d081d3305aa9b68005b2
-grid_fs2_known/trajectory.tum 6d45cf712082c8bf70ca583cf3ab7bc94c055ccdc6378ff64a5be9c19fbfe08b
+grid_fs2_known/trajectory.tum 22cdb5e5bae187f2fb26768c850126f004cdce47ae33423fabc38143e6d84858
 grid_fs2_known/landmarks.csv 874feab9a0be89db66e2762d1a45414f0612ed825af0dda47826d248d8ad43b1
-victoria_park_fs1_ml/trajectory.csv 96f2e99e2a5b13c6e420517bf1f4a28804ee396f5c6cfef3aaa0aa5b9a8d0adb
-victoria_park_fs1_ml/trajectory.tum ad5c22a41cb6ec32a21f26f902ef9867d156d71969e524e7bdff6618b0384f02
-victoria_park_fs1_ml/landmarks.csv 8e26fff7f07f39c4ed1a7d5987b717c118166e449a7a24ce8c46a9c18428cd2e
+victoria_park_fs1_ml/trajectory.csv d15da91f99301b9eb34fa919cb8c48c35ff396a6127fe9eca6f8cb53b5042c9e
+victoria_park_fs1_ml/trajectory.tum 8cd7bb5bd6daedab87fea487be85d2344e45ae09b128dec2fac491f27a4a0b27
+victoria_park_fs1_ml/landmarks.csv 2c83b94bc9af210caf87b58877169bf60d09268eff397ada384c457d93d11312
+victoria_park_fs1_ml_control/trajectory.csv 96f2e99e2a5b13c6e420517bf1f4a28804ee396f5c6cfef3aaa0aa5b9a8d0adb
+victoria_park_fs1_ml_control/trajectory.tum ad5c22a41cb6ec32a21f26f902ef9867d156d71969e524e7bdff6618b0384f02
+victoria_park_fs1_ml_control/landmarks.csv 8e26fff7f07f39c4ed1a7d5987b717c118166e449a7a24ce8c46a9c18428cd2e
 victoria_park_fs2_none/trajectory.csv ecaf3c078f48b460826bf86d5289a49b3c87ddd1514e8be1c39bb875268080a4
 victoria_park_fs2_none/trajectory.tum cb8cfa45c75866faacd4f5e2cbab702119c4c71d87f68e24657ac899b10e3d70
 victoria_park_fs2_none/landmarks.csv 7a1e5aa819b8effb7dda1f0650a87cc9f9d878b9320385aaa7e9980cc8fcafd5
@@ -71,6 +77,8 @@ webmap=(--landmarks-csv "$shared/data/bailey_sim/example_webmap_landmarks.csv"
         --waypoints-csv "$shared/data/bailey_sim/example_webmap_waypoints.csv")
 run_case webmap_fs1_known "${webmap[@]}" --algorithm fastslam1 --particles 100 --association known
 run_case webmap_fs2_known "${webmap[@]}" --algorithm fastslam2 --particles 100 --association known
+run_case webmap_fs1_known_control "${webmap[@]}" --algorithm fastslam1 --particles 100 \
+  --association known --motion-draw control
 run_case webmap_fs1_ml "${webmap[@]}" --algorithm fastslam1 --particles 50 --association ml
 run_case webmap_fs2_das "${webmap[@]}" --algorithm fastslam2 --particles 50 --association das
 run_case webmap_ekf_ml "${webmap[@]}" --algorithm ekf --association ml
@@ -79,12 +87,15 @@ run_case loop_fs1_ml_clutter --world loop --loops 1 --clutter 1 --algorithm fast
 run_case grid_fs2_known --world grid --landmarks 2000 --algorithm fastslam2 --particles 20
 vp=(--source victoria-park --data "$shared/data/victoria_park")
 run_case victoria_park_fs1_ml "${vp[@]}" --algorithm fastslam1 --particles 30 --association ml
+run_case victoria_park_fs1_ml_control "${vp[@]}" --algorithm fastslam1 --particles 30 \
+  --association ml --motion-draw control
 run_case victoria_park_fs2_none "${vp[@]}" --algorithm fastslam2 --motion none --particles 20 \
   --association ml --sigma-range 0.7 --sigma-bearing 0.03
 
 actual=""
-for dir in webmap_fs1_known webmap_fs2_known webmap_fs1_ml webmap_fs2_das webmap_ekf_ml \
-  loop_fs1_ml_clutter grid_fs2_known victoria_park_fs1_ml victoria_park_fs2_none; do
+for dir in webmap_fs1_known webmap_fs1_known_control webmap_fs2_known webmap_fs1_ml \
+  webmap_fs2_das webmap_ekf_ml loop_fs1_ml_clutter grid_fs2_known victoria_park_fs1_ml \
+  victoria_park_fs1_ml_control victoria_park_fs2_none; do
   for file in trajectory.csv trajectory.tum landmarks.csv; do
     sum=$(sha256sum "$work/$dir/$file" | cut -d' ' -f1)
     actual+="$dir/$file $sum"$'\n'

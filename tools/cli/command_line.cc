@@ -271,10 +271,10 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
       ->check(CLI::IsMember(motion_choices()))
       ->capture_default_str();
   cmd.add_option("--motion-draw", w.motion_draw,
-                 "FastSLAM with odometry: control moves each particle at every control; "
-                 "composed once per run of controls between scans (1.0 draws from the run's "
-                 "first-order Gaussian, 2.0's prior is the same up to rounding), faster "
-                 "(docs/engine-config.md, \"The motion draw\")")
+                 "control moves each particle at every control; composed (FastSLAM with "
+                 "odometry) once per run of controls between scans (1.0 draws from the run's "
+                 "first-order Gaussian, 2.0's prior is the same up to rounding), faster; auto: "
+                 "composed where it applies (docs/engine-config.md, \"The motion draw\")")
       ->check(CLI::IsMember(engine::enum_names<engine::MotionDraw>()))
       ->capture_default_str();
   cmd.add_option("--particles", f.particles, "particles (M)")

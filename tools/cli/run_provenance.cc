@@ -80,7 +80,7 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       // Filter.
       {"algorithm", engine::enum_name(config.algorithm)},
       {"motion", o.motion},
-      {"motion-draw", engine::enum_name(config.motion_draw)},
+      {"motion-draw", engine::enum_name(engine::resolved_motion_draw(config))},
       {"particles", config.particles},
       {"association", association},
       {"log-p0", config.log_new_landmark},

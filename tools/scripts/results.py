@@ -46,7 +46,7 @@ ACCURACY = [
      "`fastslam run` with no option: pose RMSE raw and after the best rigid (SE(2)) fit of the "
      "path onto the truth; dead reckoning's raw RMSE; the map's GOSPA (cutoff 1 m, half the "
      "spacing; order 2) after the path's alignment.",
-     [("defaults", ""), ("composed motion draw", "--motion-draw composed")]),
+     [("defaults", ""), ("per-control motion draw", "--motion-draw control")]),
     ("webmap", "Bailey's webmap (simulated, 35 landmarks, 17382 controls), M = 100",
      ["pose_rmse_m", "pose_rmse_aligned_m", "pose_rpe_translation_rmse_m",
       "dead_reckoning.pose_rmse_m", "gospa_m", "landmark_rmse_m"],
@@ -59,14 +59,14 @@ ACCURACY = [
       ("FastSLAM 2.0, known ids", f"{WEBMAP} --algorithm fastslam2 --association known"),
       ("FastSLAM 1.0, ML", f"{WEBMAP} --algorithm fastslam1 --association ml"),
       ("FastSLAM 2.0, ML", f"{WEBMAP} --algorithm fastslam2 --association ml"),
-      ("FastSLAM 1.0, known ids, composed motion draw",
-       f"{WEBMAP} --algorithm fastslam1 --association known --motion-draw composed"),
-      ("FastSLAM 1.0, ML, composed motion draw",
-       f"{WEBMAP} --algorithm fastslam1 --association ml --motion-draw composed"),
-      ("FastSLAM 2.0, known ids, composed motion",
-       f"{WEBMAP} --algorithm fastslam2 --association known --motion-draw composed"),
-      ("FastSLAM 2.0, ML, composed motion",
-       f"{WEBMAP} --algorithm fastslam2 --association ml --motion-draw composed"),
+      ("FastSLAM 1.0, known ids, per-control motion draw",
+       f"{WEBMAP} --algorithm fastslam1 --association known --motion-draw control"),
+      ("FastSLAM 1.0, ML, per-control motion draw",
+       f"{WEBMAP} --algorithm fastslam1 --association ml --motion-draw control"),
+      ("FastSLAM 2.0, known ids, per-control motion",
+       f"{WEBMAP} --algorithm fastslam2 --association known --motion-draw control"),
+      ("FastSLAM 2.0, ML, per-control motion",
+       f"{WEBMAP} --algorithm fastslam2 --association ml --motion-draw control"),
       ("FastSLAM 1.0, DAS", f"{WEBMAP} --algorithm fastslam1 --association das"),
       ("FastSLAM 2.0, DAS", f"{WEBMAP} --algorithm fastslam2 --association das"),
       ("FastSLAM 2.0, M = 1, known ids", f"{WEBMAP} --algorithm fastslam2 --particles 1"),
@@ -95,8 +95,8 @@ ACCURACY = [
        f"{WEBMAP} {CLUTTER} --algorithm fastslam1 --association das --existence-confirm-at -1e9"),
       ("FastSLAM 1.0, ML, no clutter, P_D = 1",
        f"{WEBMAP} --algorithm fastslam1 --association ml"),
-      ("FastSLAM 1.0, ML, composed motion draw",
-       f"{WEBMAP} {CLUTTER} --algorithm fastslam1 --association ml --motion-draw composed")]),
+      ("FastSLAM 1.0, ML, per-control motion draw",
+       f"{WEBMAP} {CLUTTER} --algorithm fastslam1 --association ml --motion-draw control")]),
     ("victoria-park", "Victoria Park (real, 61945 controls, 7249 scans, 4466 GPS fixes)",
      ["gps_rmse_m", "gps_rmse_aligned_m", "dead_reckoning.gps_rmse_m", "landmarks"],
      "GPS RMSE over every fix, the estimate interpolated at the fix's time; aligned: after the "
@@ -104,8 +104,8 @@ ACCURACY = [
      "integrated by the car model); landmarks: in the most likely particle's map.",
      [("FastSLAM 1.0, M = 100, ML (the source's defaults)",
        f"{VP} --algorithm fastslam1 --particles 100 --association ml"),
-      ("FastSLAM 1.0, M = 100, ML, composed motion draw",
-       f"{VP} --algorithm fastslam1 --particles 100 --association ml --motion-draw composed"),
+      ("FastSLAM 1.0, M = 100, ML, per-control motion draw",
+       f"{VP} --algorithm fastslam1 --particles 100 --association ml --motion-draw control"),
       ("FastSLAM 1.0, M = 100, ML, no negative information",
        f"{VP} --algorithm fastslam1 --particles 100 --association ml --no-negative-information"),
       ("FastSLAM 2.0, M = 1, ML", f"{VP} --algorithm fastslam2 --particles 1 --association ml"),
@@ -135,10 +135,10 @@ ACCURACY = [
       for r in range(1, 6)] +
      [(f"robot {r}, FastSLAM 1.0, M = 100, ML", f"{UTIAS} --robot {r} --association ml")
       for r in range(1, 6)] +
-     [(f"robot {r}, FastSLAM 1.0, M = 100, mixed, composed motion draw",
-       f"{UTIAS} --robot {r} --motion-draw composed") for r in range(1, 6)] +
-     [(f"robot {r}, FastSLAM 1.0, M = 100, ML, composed motion draw",
-       f"{UTIAS} --robot {r} --association ml --motion-draw composed") for r in range(1, 6)]),
+     [(f"robot {r}, FastSLAM 1.0, M = 100, mixed, per-control motion draw",
+       f"{UTIAS} --robot {r} --motion-draw control") for r in range(1, 6)] +
+     [(f"robot {r}, FastSLAM 1.0, M = 100, ML, per-control motion draw",
+       f"{UTIAS} --robot {r} --association ml --motion-draw control") for r in range(1, 6)]),
 ]
 
 # The README's short table: (table id, row label, metric key, metric name).
