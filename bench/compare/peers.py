@@ -70,10 +70,10 @@ def cases(opts, scratch):
     out = []
     for m in opts.particles:
         for t, draw in ((t, d) for t in opts.threads for d in opts.motion_draws):
-            # The draw per control is the default: its command names no --motion-draw.
-            what = "" if draw == "control" else f", --motion-draw {draw}"
+            # The default draw (auto): its command names no --motion-draw.
+            what = "" if draw == "auto" else f", --motion-draw {draw}"
             run = [fastslam, "run", *world, "--particles", str(m), "--threads", str(t),
-                   "--no-progress"] + ([] if draw == "control" else ["--motion-draw", draw])
+                   "--no-progress"] + ([] if draw == "auto" else ["--motion-draw", draw])
             threads = f"{t} thread{'s' if t > 1 else ''}"
             out_dir = os.path.join(scratch, f"out-{m}-{t}-{draw}")
             out.append((f"fastslam run --out{what}, {threads}", m,
@@ -103,8 +103,9 @@ def main():
     parser.add_argument("--fasterslam", help="FasterSLAM's src/ folder, built (see above)")
     parser.add_argument("--particles", default="100,1000", help="comma-separated M")
     parser.add_argument("--threads", default="1", help="comma-separated thread counts")
-    parser.add_argument("--motion-draws", default="control",
-                        help="comma-separated --motion-draw values to time (control, composed)")
+    parser.add_argument("--motion-draws", default="auto",
+                        help="comma-separated --motion-draw values to time (auto, the default; "
+                        "control; composed)")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--picture", action="store_true",
                         help="also time the command with its default picture")

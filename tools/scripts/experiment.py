@@ -9,7 +9,8 @@ Usage: tools/scripts/experiment.py NAME --out DIR [--seeds N] [--tiny] [--jobs 2
 NAME: particles (fig. 13, 22), odometry-noise (fig. 16-17), measurement-noise (fig. 21),
 loop-size (fig. 26a and 26b), timing (fig. 24), lg-slam, or all.
 
-Every run is single-threaded (--threads 1 --no-progress); --jobs runs go in parallel (timing
+Every run is single-threaded (--threads 1 --no-progress) and moves the particles control by
+control (--motion-draw control), as Bailey's simulator code does; --jobs runs go in parallel (timing
 runs one at a time whatever --jobs says, so that they do not disturb each other). Seeds are
 1..N; a seed fixes the world (procedural loop worlds are drawn per seed), the simulated noise
 and the filter. Error bars are the standard error of the mean over seeds, except odometry-noise,
@@ -108,7 +109,8 @@ class Runner:
 
     def one_run(self, index, args, trace_every):
         out = os.path.join(self.scratch, f"run{index}")
-        cmd = ["run", *args, "--threads", "1", "--no-progress", "--no-plot", "--out", out]
+        cmd = ["run", *args, "--motion-draw", "control", "--threads", "1", "--no-progress",
+               "--no-plot", "--out", out]
         trace_path = out + ".trace.csv"
         if trace_every:
             cmd += ["--trace", trace_path, "--trace-every", str(trace_every)]

@@ -394,7 +394,7 @@ def measure_front_ends(build, repetitions):
 
 def measure_whole_process(build, repetitions, fasterslam):
     script = os.path.join(ROOT, "bench", "compare", "peers.py")
-    args = ["--particles", "100,1000", "--threads", "1,2", "--motion-draws", "control,composed",
+    args = ["--particles", "100,1000", "--threads", "1,2", "--motion-draws", "auto,control",
             "--rounds", str(repetitions), "--picture"]
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "peers.json")

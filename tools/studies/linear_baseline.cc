@@ -42,6 +42,11 @@ LinearFastSlam::LinearFastSlam(const engine::FilterConfig& config)
         std::string(engine::to_string(config.association)) + ", " +
         std::string(engine::to_string(config.motion.kind)) + ")");
   }
+  if (config.motion_draw == engine::MotionDraw::kComposed) {
+    throw std::invalid_argument(
+        "linear baseline: motion_draw 'composed': it moves its particles control by control "
+        "(use 'auto' or 'control')");
+  }
   r_ << config.sensor.sigma_range * config.sensor.sigma_range, 0, 0,
       config.sensor.sigma_bearing * config.sensor.sigma_bearing;
   const double log_uniform = -std::log(static_cast<double>(config.particles));

@@ -3,7 +3,9 @@
 // particle, with ML association by a linear scan of each map. It shares the engine's math
 // (motion sampling with the keyed streams, the gate, evaluate_observation, Joseph update,
 // negative information, ML with mutual exclusion) and resamples (systematic) after every scan.
-// Supported: FastSLAM 1.0, ML, Bailey's car; the constructor refuses anything else.
+// Supported: FastSLAM 1.0, ML, Bailey's car; the constructor refuses anything else. It moves
+// its particles control by control under motion_draw 'auto' too (an explicit 'composed' is
+// refused).
 // docs/scaling.md compares it with the tree engine.
 //
 // Ownership: owns its particles and their maps; `observe` and `set_map` borrow their spans for

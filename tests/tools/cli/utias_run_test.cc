@@ -41,10 +41,11 @@ TEST(UtiasRun, EveryRobotRunsWithNoOtherFlag) {
     EXPECT_EQ(m["match_radius_m"], 0.5);
     EXPECT_EQ(m["rpe_delta_m"], 1.0);
     EXPECT_GT(m["pose_rpe_pairs"].get<int>(), 30);
-    // Seed 1 measured 0.14-0.27 m aligned, 0.48-1.11 m raw (a rotation about the start pose
-    // the standing start's heading noise leaves), dead reckoning 1.5-6.6 m.
+    // Seed 1 measured 0.13-0.21 m aligned, 0.18-2.24 m raw (a rotation about the start pose
+    // the standing start's heading noise leaves; robot 5's worst over seeds 1-10 is 2.60 m,
+    // docs/results.md), dead reckoning 1.5-6.6 m.
     EXPECT_LT(m["pose_rmse_aligned_m"].get<double>(), 0.4);
-    EXPECT_LT(m["pose_rmse_m"].get<double>(), 2.0);
+    EXPECT_LT(m["pose_rmse_m"].get<double>(), 3.0);
     EXPECT_GT(m["dead_reckoning"]["pose_rmse_m"].get<double>(),
               1.5 * m["pose_rmse_m"].get<double>());
     EXPECT_EQ(m["worse_than_dead_reckoning"], false);
@@ -55,12 +56,14 @@ TEST(UtiasRun, EveryRobotRunsWithNoOtherFlag) {
   }
 }
 
-// The calibrated lead is the data's: taking it off narrows the innovations. Robot 1, seed 1:
-// 15.8 % of the associations beyond the model's 99 % bound with it, 28.8 % with the rows' own
-// times (--utias-odometry-lead 0).
+// The calibrated lead is the data's: taking it off narrows the innovations. Robot 1, seed 1,
+// particles moved control by control: 15.8 % of the associations beyond the model's 99 % bound
+// with it, 28.8 % with the rows' own times (--utias-odometry-lead 0). The composed motion
+// narrows the gap (17.4 % and 21.2 %, mean NIS 11.4 and 11.3).
 TEST(UtiasRun, TheOdometryLeadNarrowsTheInnovations) {
   FASTSLAM_REQUIRE_SHARED(shared);
-  const std::string args = "--source utias --data " + shared + "/data/utias_mrclam/dataset1";
+  const std::string args = "--source utias --data " + shared +
+                           "/data/utias_mrclam/dataset1 --motion-draw control";
   const nlohmann::json led = run(args, "led");
   const nlohmann::json own = run(args + " --utias-odometry-lead 0", "own_times");
   EXPECT_EQ(own["options"]["utias-odometry-lead"], 0.0);

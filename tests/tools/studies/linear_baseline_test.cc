@@ -85,6 +85,7 @@ TEST(LinearFastSlam, MatchesTheTreeEngineStepForStep) {
   engine::FilterConfig config = baseline_config(12);
   config.resample.when = parallel::ResamplePolicy::When::kEveryStep;
   config.resample.scheme = parallel::ResampleScheme::kSystematic;
+  config.motion_draw = engine::MotionDraw::kEveryControl;  // the baseline moves control by control
   config.initial_pose[0] = world.start_x;
   config.initial_pose[1] = world.start_y;
   config.initial_pose[2] = world.start_theta;
@@ -163,6 +164,9 @@ TEST(LinearFastSlam, RefusesUnsupportedConfigsAndBadInput) {
   c.association = engine::Association::kKnown;
   EXPECT_THROW(LinearFastSlam{c}, std::invalid_argument);
   c = baseline_config(0);
+  EXPECT_THROW(LinearFastSlam{c}, std::invalid_argument);
+  c = baseline_config(4);
+  c.motion_draw = engine::MotionDraw::kComposed;
   EXPECT_THROW(LinearFastSlam{c}, std::invalid_argument);
 
   LinearFastSlam f(baseline_config(4));
