@@ -13,9 +13,25 @@ void bump(std::atomic<std::int64_t>& counter, std::int64_t delta) noexcept {
   counter.store(counter.load(std::memory_order_relaxed) + delta, std::memory_order_relaxed);
 }
 
+// The heap this thread last used and its per-thread data there: one comparison per block on
+// the hot path instead of a pthread_getspecific (a run allocates from one heap per filter).
+struct LastUsed {
+  std::uint64_t heap = 0;  // NodeHeap::id(); 0 is no heap's
+  void* data = nullptr;
+};
+thread_local LastUsed last_counters;
+thread_local LastUsed last_pool_cache;
+
+std::atomic<std::uint64_t> heap_ids{1};
+
 }  // namespace
 
+std::uint64_t NodeHeap::next_id() noexcept {
+  return heap_ids.fetch_add(1, std::memory_order_relaxed);
+}
+
 NodeHeap::Counters& NodeHeap::local_counters() {
+  if (last_counters.heap == id_) return *static_cast<Counters*>(last_counters.data);
   Counters*& mine = local_.local();
   if (mine == nullptr) {
     auto fresh = std::make_unique<Counters>();
@@ -23,6 +39,7 @@ NodeHeap::Counters& NodeHeap::local_counters() {
     registry_.push_back(std::move(fresh));
     mine = registry_.back().get();
   }
+  last_counters = {id_, mine};
   return *mine;
 }
 
@@ -61,6 +78,13 @@ void MallocHeap::do_deallocate(void* block, std::size_t bytes) noexcept {
 
 PoolHeap::PoolHeap(std::size_t max_cached_per_size) : max_cached_(max_cached_per_size) {}
 
+PoolHeap::Cache& PoolHeap::local_cache() {
+  if (last_pool_cache.heap == id()) return *static_cast<Cache*>(last_pool_cache.data);
+  Cache& cache = caches_.local();
+  last_pool_cache = {id(), &cache};
+  return cache;
+}
+
 PoolHeap::~PoolHeap() {
   for (Cache& cache : caches_) {
     for (int k = 0; k < kSizeClasses; ++k) {
@@ -74,7 +98,7 @@ PoolHeap::~PoolHeap() {
 
 void* PoolHeap::do_allocate(std::size_t bytes) {
   if (bytes < sizeof(FreeBlock)) bytes = sizeof(FreeBlock);  // as do_deallocate files it
-  Cache& cache = caches_.local();
+  Cache& cache = local_cache();
   for (int k = 0; k < kSizeClasses && cache.size[k] != 0; ++k) {
     if (cache.size[k] == bytes) {
       if (FreeBlock* block = cache.head[k]) {
@@ -90,7 +114,7 @@ void* PoolHeap::do_allocate(std::size_t bytes) {
 
 void PoolHeap::do_deallocate(void* block, std::size_t bytes) noexcept {
   if (bytes < sizeof(FreeBlock)) bytes = sizeof(FreeBlock);
-  Cache& cache = caches_.local();
+  Cache& cache = local_cache();
   for (int k = 0; k < kSizeClasses; ++k) {
     if (cache.size[k] == 0) cache.size[k] = bytes;  // first free of a new size claims a class
     if (cache.size[k] == bytes) {

@@ -7,7 +7,8 @@
 // 16-byte aligned.
 // Thread safety: allocate, deallocate and stats are thread-safe; a block may be freed by any
 // thread. Costs: allocate and deallocate O(1) (a short lock on a thread's first use of a
-// PoolHeap); stats() O(threads that used the heap), under a lock.
+// heap; a thread-specific lookup when it last used another heap); stats() O(threads that used
+// the heap), under a lock.
 #pragma once
 
 #include <atomic>
@@ -48,8 +49,14 @@ class NodeHeap {
  protected:
   virtual void* do_allocate(std::size_t bytes) = 0;
   virtual void do_deallocate(void* block, std::size_t bytes) noexcept = 0;
+  // Unique over the process's life (never reused), so a thread's note of the heap it last used
+  // cannot match a later heap at the same address.
+  std::uint64_t id() const noexcept { return id_; }
 
  private:
+  static std::uint64_t next_id() noexcept;
+  const std::uint64_t id_ = next_id();
+
   // Written only by the owning thread (relaxed load + store, no read-modify-write); atomics so
   // that `stats()` from another thread is not a data race.
   struct alignas(64) Counters {
@@ -100,6 +107,8 @@ class PoolHeap final : public NodeHeap {
     FreeBlock* head[kSizeClasses] = {};
     std::size_t count[kSizeClasses] = {};
   };
+  Cache& local_cache();
+
   std::size_t max_cached_;
   tbb::enumerable_thread_specific<Cache, tbb::cache_aligned_allocator<Cache>,
                                   tbb::ets_key_per_instance>

@@ -34,7 +34,10 @@ void TrajectorySums::weights(std::size_t begin, std::size_t lanes, double* w) co
   assert(begin % kG == 0 && lanes % kG == 0);
   const std::size_t real =
       begin < log_weight.size() ? std::min(lanes, log_weight.size() - begin) : 0;
-  for (std::size_t l = 0; l < real; ++l) w[l] = std::exp(log_weight[begin + l] - shift);
+  // shift is the largest log-weight; exp_nonpositive gives the same bits with any C library.
+  for (std::size_t l = 0; l < real; ++l) {
+    w[l] = parallel::exp_nonpositive(log_weight[begin + l] - shift);
+  }
   std::fill(w + real, w + lanes, 0.0);
 }
 

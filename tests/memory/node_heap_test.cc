@@ -255,6 +255,55 @@ TYPED_TEST(NodeHeapTest, ManyHeapsOneAfterAnother) {
   }
 }
 
+// A thread remembers the heap it last used (NodeHeap::id); a later heap built at the very same
+// address must count from zero, not into the dead heap's counters.
+TYPED_TEST(NodeHeapTest, AHeapAtADeadHeapsAddressCountsAlone) {
+  alignas(TypeParam) unsigned char storage[sizeof(TypeParam)];
+  for (int round = 0; round < 4; ++round) {
+    auto* heap = ::new (storage) TypeParam;
+    void* block = heap->allocate(40);
+    const HeapStats stats = heap->stats();
+    EXPECT_EQ(stats.allocations, 1) << "round " << round;
+    EXPECT_EQ(stats.live_nodes, 1) << "round " << round;
+    heap->deallocate(block, 40);
+    EXPECT_EQ(heap->stats().live_nodes, 0) << "round " << round;
+    heap->~TypeParam();
+  }
+}
+
+// Threads switching between two live heaps: each heap's counts are its own.
+TYPED_TEST(NodeHeapTest, ThreadsAlternatingBetweenHeapsCountEachAlone) {
+  TypeParam a;
+  TypeParam b;
+  std::vector<void*> from_a;
+  std::vector<void*> from_b;
+  for (int i = 0; i < 100; ++i) {
+    from_a.push_back(a.allocate(48));
+    from_b.push_back(b.allocate(48));
+    from_b.push_back(b.allocate(80));
+  }
+  std::thread other([&] {
+    for (int i = 0; i < 50; ++i) {
+      a.deallocate(from_a[i], 48);
+      b.deallocate(from_b[2 * i], 48);
+    }
+    from_a.push_back(a.allocate(48));
+  });
+  other.join();
+  EXPECT_EQ(a.stats().live_nodes, 51);
+  EXPECT_EQ(a.stats().allocations, 101);
+  EXPECT_EQ(b.stats().live_nodes, 150);
+  EXPECT_EQ(b.stats().live_bytes, 50 * 48 + 100 * 80);
+  for (std::size_t i = 50; i < from_a.size(); ++i) a.deallocate(from_a[i], 48);
+  for (int i = 0; i < 100; ++i) {
+    if (i >= 50) b.deallocate(from_b[2 * i], 48);
+    b.deallocate(from_b[2 * i + 1], 80);
+  }
+  EXPECT_EQ(a.stats().live_nodes, 0);
+  EXPECT_EQ(b.stats().live_nodes, 0);
+  EXPECT_EQ(b.stats().live_bytes, 0);
+}
+
 TEST(PoolHeap, ReusesTheLastFreedBlockOfTheSameSize) {
   PoolHeap heap;
   void* a = heap.allocate(264);
