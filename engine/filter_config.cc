@@ -31,8 +31,9 @@ void validate_ekf(const FilterConfig& c) {
 
 MotionDraw resolved_motion_draw(const FilterConfig& c) {
   if (c.motion_draw != MotionDraw::kAuto) return c.motion_draw;
-  return c.algorithm != Algorithm::kEkf && !without_odometry(c.motion.kind) ? MotionDraw::kComposed
-                                                                           : MotionDraw::kEveryControl;
+  return c.algorithm != Algorithm::kEkf && !without_odometry(c.motion.kind)
+             ? MotionDraw::kComposed
+             : MotionDraw::kEveryControl;
 }
 
 void validate(const FilterConfig& c) {

@@ -1613,8 +1613,8 @@ TEST(FilterAccuracyTest, BaileyWebmapKnownAssociation) {
 // Paper fig. 22: with one particle, FastSLAM 1.0 never corrects its pose (it is dead reckoning
 // with a map), while 2.0 draws the pose from a proposal that includes the measurements. With
 // the measurement noise ten times lower (0.01 m, 0.1 deg), measured over seeds 1..10: FS2 M=1
-// pose RMSE 5.4 +- 1.9 m, FS1 M=1 16.0 +- 6.6 m (13.5 +- 4.7 m moved control by control). Without the fold (proposal = motion
-// prior) FS2 M=1 gives 14.2 m.
+// pose RMSE 5.4 +- 1.9 m, FS1 M=1 16.0 +- 6.6 m (13.5 +- 4.7 m moved control by control). Without
+// the fold (proposal = motion prior) FS2 M=1 gives 14.2 m.
 TEST(FilterAccuracyTest, FastSlam2WithOneParticleStaysBoundedWhereFastSlam1Drifts) {
   FASTSLAM_REQUIRE_SHARED(shared);
   const tools::World world = webmap(shared);

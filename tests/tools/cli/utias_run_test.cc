@@ -62,8 +62,8 @@ TEST(UtiasRun, EveryRobotRunsWithNoOtherFlag) {
 // narrows the gap (17.4 % and 21.2 %, mean NIS 11.4 and 11.3).
 TEST(UtiasRun, TheOdometryLeadNarrowsTheInnovations) {
   FASTSLAM_REQUIRE_SHARED(shared);
-  const std::string args = "--source utias --data " + shared +
-                           "/data/utias_mrclam/dataset1 --motion-draw control";
+  const std::string args =
+      "--source utias --data " + shared + "/data/utias_mrclam/dataset1 --motion-draw control";
   const nlohmann::json led = run(args, "led");
   const nlohmann::json own = run(args + " --utias-odometry-lead 0", "own_times");
   EXPECT_EQ(own["options"]["utias-odometry-lead"], 0.0);
