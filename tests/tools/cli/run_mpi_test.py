@@ -135,7 +135,14 @@ class RunOverRanksTest(unittest.TestCase):
         cmd = ["mpirun", "--oversubscribe"] + (["--allow-run-as-root"] if os.geteuid() == 0 else [])
         p = subprocess.Popen(cmd + ["-n", "2", FASTSLAM] + args, stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True)
-        time.sleep(3)
+        # Signalled before the ranks install their handlers (MPI's start-up under a sanitizer on
+        # a loaded machine takes seconds), the ranks would just die: wait until rank 0 has
+        # opened its output files, which it does after installing them, then a second more.
+        deadline = time.monotonic() + TIMEOUT / 2
+        while not (os.path.isdir(out) and os.listdir(out)) and p.poll() is None:
+            self.assertLess(time.monotonic(), deadline, "the run never opened its outputs")
+            time.sleep(0.1)
+        time.sleep(1)
         p.send_signal(signal.SIGINT)  # mpirun forwards it to every rank
         _, err = p.communicate(timeout=TIMEOUT)
         self.assertTrue(os.path.exists(os.path.join(out, "metrics.json")), err)
