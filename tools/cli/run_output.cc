@@ -236,13 +236,15 @@ void check_output_file(const std::string& option, const std::string& path,
 std::vector<std::string> write_run_files(const std::string& dir, const RunFiles& files,
                                          std::FILE* out) {
   std::vector<std::string> errors;
-  std::vector<std::string> written;
+  std::vector<std::string> written, targets;
+  // The renames reach the disk with one sync of their directories, at the end.
   const auto attempt = [&](const char* name, auto&& write) {
     try {
       AtomicFile file(dir + "/" + name);
       write(file);
-      file.commit();
+      file.commit(DirectorySync::kDeferred);
       written.emplace_back(name);
+      targets.push_back(file.target());
     } catch (const std::exception& e) {
       errors.emplace_back(e.what());
     }
@@ -257,6 +259,7 @@ std::vector<std::string> write_run_files(const std::string& dir, const RunFiles&
     metrics["status"] = "failed: " + errors.front();
   }
   attempt("metrics.json", [&](AtomicFile& f) { f.write(metrics.dump(2) + '\n'); });
+  sync_directories(targets);
   // The list in the order a reader expects: metrics, the streamed files, the map, the truth.
   std::string list;
   const auto add = [&](const std::string& name) {

@@ -67,10 +67,10 @@ class RunRecorder::Writer {
 };
 
 // One output file of poses: CSV "t,x,y,theta" (or "t,x,y" for fixes) or TUM, put in place by
-// close(). The poses are queued; every kBatch of them a background task formats and writes them
-// to the temporary while the run goes on (one task at a time per file, so the lines keep their
-// order and the formatting buffers have one user), and close() writes the rest and commits.
-// Without a writer (no thread to be had) each task runs in the caller.
+// its closing steps. The poses are queued; every kBatch of them a background task formats and
+// writes them to the temporary while the run goes on (one task at a time per file, so the lines
+// keep their order and the formatting buffers have one user), and the closing steps write the rest
+// and commit. Without a writer (no thread to be had) each task runs in the caller.
 class RunRecorder::PoseFile {
  public:
   enum class Format { kCsv, kCsvPosition, kTum };
@@ -98,40 +98,49 @@ class RunRecorder::PoseFile {
   PoseFile& operator=(const PoseFile&) = delete;
 
   // Throws std::runtime_error naming the file once a write has failed (reported when the next
-  // batch is handed over, or by close()).
+  // batch is handed over, or by the closing steps).
   void add(const StampedPose& p) {
     pending_.push_back(p);
-    if (pending_.size() >= kBatch) hand_over(false);
+    if (pending_.size() >= kBatch) hand_over(Stage::kBatch);
   }
 
-  // Writes what is queued and puts the file in place in the background; close() waits for it.
-  void start_close() { hand_over(true); }
-  // Throws as add() and as AtomicFile::commit().
-  void close() {
-    if (!closing_) start_close();
-    wait();
-  }
+  // Closing, in three steps so that several files are written to the disk together: the rest
+  // of the text and the start of its writeback; the commit (the fsync and the rename, the
+  // directory's sync left to the caller); waiting for both. Each throws the first error of the
+  // file's earlier tasks, finish_close the commit's.
+  void start_close() { hand_over(Stage::kWriteback); }
+  void start_commit() { hand_over(Stage::kCommit); }
+  void finish_close() { wait(); }
+  const std::string& target() const { return file_.target(); }
 
  private:
   static constexpr std::size_t kBatch = 1024;  // a full disk ends the run within two batches
+  enum class Stage { kBatch, kWriteback, kCommit };
 
   void wait() {
     if (job_.valid()) job_.get();  // rethrows the task's error
   }
 
-  void hand_over(bool commit) {
+  void hand_over(Stage stage) {
     wait();
-    closing_ = commit;
-    auto task = [this, batch = std::move(pending_), commit] {
-      write(batch);
-      if (commit) file_.commit();
-    };
-    pending_ = {};
-    pending_.reserve(commit ? 0 : kBatch);
+    std::function<void()> task;
+    if (stage == Stage::kCommit) {
+      task = [this] { file_.commit(DirectorySync::kDeferred); };
+    } else {
+      task = [this, batch = std::move(pending_), stage] {
+        write(batch);
+        if (stage == Stage::kWriteback) file_.start_writeback();
+      };
+      pending_ = {};
+      if (stage == Stage::kBatch) pending_.reserve(kBatch);
+    }
     if (writer_ != nullptr) {
       job_ = writer_->run(std::move(task));
     } else {
-      task();
+      // No thread: the task runs here, its error kept for the next step as the writer's is.
+      std::packaged_task<void()> job(std::move(task));
+      job_ = job.get_future();
+      job();
     }
   }
 
@@ -154,7 +163,6 @@ class RunRecorder::PoseFile {
   AtomicFile file_;
   Writer* writer_;
   std::vector<StampedPose> pending_;
-  bool closing_ = false;
   // Used by the task only.
   std::string chunk_;
   TextLine text_;
@@ -271,32 +279,31 @@ void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
 
 RecordedRun RunRecorder::finish() {
   RecordedRun r;
-  // Each file on its own: one that failed leaves the others whole. The writer commits them
-  // while the run's thread waits for the first.
-  for (std::unique_ptr<PoseFile>* f :
-       {&trajectory_csv_, &trajectory_tum_, &truth_csv_, &gps_csv_, &dr_csv_}) {
-    if (!*f) continue;
-    try {
-      (*f)->start_close();
-    } catch (const std::exception&) {
-      // The error of an earlier batch: close() below reports it.
-    }
-  }
-  auto close = [&](std::unique_ptr<PoseFile>& f, const char* name) {
-    if (!f) return;
-    try {
-      f->close();
-      r.files.emplace_back(name);
-    } catch (const std::exception& e) {
-      r.errors.emplace_back(e.what());
-    }
-    f.reset();
+  // Each file on its own: one that failed leaves the others whole. The writer writes the
+  // files' last text and starts their writeback, then commits them, while this thread scores;
+  // their directories are synced once at the end.
+  struct Closing {
+    std::unique_ptr<PoseFile>* file;
+    const char* name;
+    std::optional<std::string> error;
   };
-  close(trajectory_csv_, "trajectory.csv");
-  close(trajectory_tum_, "trajectory.tum");
-  close(truth_csv_, "truth.csv");
-  close(gps_csv_, "gps.csv");
-  close(dr_csv_, "dead_reckoning.csv");
+  std::vector<Closing> closing;
+  for (const auto& [file, name] :
+       {std::pair{&trajectory_csv_, "trajectory.csv"},
+        std::pair{&trajectory_tum_, "trajectory.tum"}, std::pair{&truth_csv_, "truth.csv"},
+        std::pair{&gps_csv_, "gps.csv"}, std::pair{&dr_csv_, "dead_reckoning.csv"}}) {
+    if (*file) closing.push_back({file, name, std::nullopt});
+  }
+  const auto step = [](Closing& c, void (PoseFile::*call)()) {
+    if (c.error) return;
+    try {
+      ((**c.file).*call)();
+    } catch (const std::exception& e) {
+      c.error = e.what();
+    }
+  };
+  for (Closing& c : closing) step(c, &PoseFile::start_close);
+  for (Closing& c : closing) step(c, &PoseFile::start_commit);
   auto score = [&](Scored& s, std::optional<TrajectoryMetrics>& into) {
     if (s.error) {
       r.warnings.push_back(std::string(s.name) + " not computed: " + *s.error);
@@ -314,6 +321,18 @@ RecordedRun RunRecorder::finish() {
     if (truth_poses_ > 0) score(dr_truth_, r.dead_reckoning.truth);
     if (gps_fixes_ > 0) score(dr_gps_, r.dead_reckoning.gps);
   }
+  std::vector<std::string> committed;
+  for (Closing& c : closing) {
+    step(c, &PoseFile::finish_close);
+    if (c.error) {
+      r.errors.push_back(*c.error);
+    } else {
+      r.files.emplace_back(c.name);
+      committed.push_back((**c.file).target());
+    }
+    c.file->reset();
+  }
+  sync_directories(committed);
   r.last_truth = last_truth_;
   r.truth_poses = truth_poses_;
   r.gps_fixes = gps_fixes_;

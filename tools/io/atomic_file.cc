@@ -1,5 +1,6 @@
 #include "tools/io/atomic_file.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <csignal>
 #include <cstring>
@@ -8,6 +9,7 @@
 #include <stdexcept>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <vector>
 
 namespace fastslam::tools {
 namespace {
@@ -20,6 +22,14 @@ std::string directory_of(const std::string& path) {
   const std::size_t slash = path.rfind('/');
   if (slash == std::string::npos) return ".";
   return slash == 0 ? "/" : path.substr(0, slash);
+}
+
+void sync_directory_of(const std::string& path) {
+  const int dir = ::open(directory_of(path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir >= 0) {
+    (void)::fsync(dir);
+    ::close(dir);
+  }
 }
 
 const char* kind_of(mode_t mode) {
@@ -135,7 +145,15 @@ void AtomicFile::flush() {
   if (!drain()) fail("write failed");
 }
 
-void AtomicFile::commit() {
+void AtomicFile::start_writeback() {
+  if (!drain()) fail("write failed");
+#if defined(__linux__)
+  // Only a hint: a file system without it (EINVAL, ENOSYS) is written at the fsync.
+  (void)::sync_file_range(fd_, 0, 0, SYNC_FILE_RANGE_WRITE);
+#endif
+}
+
+void AtomicFile::commit(DirectorySync directory) {
   if (!drain()) fail("write failed");
   if (!stream_) {
     error_ = error_ != 0 ? error_ : EIO;
@@ -157,10 +175,16 @@ void AtomicFile::commit() {
   }
   temp_.clear();
   // The rename reaches the disk with its directory.
-  const int dir = ::open(directory_of(target_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dir >= 0) {
-    (void)::fsync(dir);
-    ::close(dir);
+  if (directory == DirectorySync::kNow) sync_directory_of(target_);
+}
+
+void sync_directories(std::span<const std::string> targets) {
+  std::vector<std::string> done;
+  for (const std::string& target : targets) {
+    std::string dir = directory_of(target);
+    if (std::find(done.begin(), done.end(), dir) != done.end()) continue;
+    sync_directory_of(target);
+    done.push_back(std::move(dir));
   }
 }
 

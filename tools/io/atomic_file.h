@@ -5,18 +5,27 @@
 // (the file it names is replaced, the link stays); a directory, a device, a FIFO or a socket is
 // refused, never replaced.
 //
+// A run writing several files into one directory starts their writeback, commits each with
+// the directory's sync deferred and syncs the directory once (sync_directories): the disk then
+// writes the files together and the renames reach it in one directory sync.
+//
 // Ownership: owns its descriptor and the temporary. Thread safety: thread-compatible.
 // Costs: writes are buffered (64 KiB) and reach the kernel when the buffer fills or on
-// flush(); commit() costs an fsync.
+// flush(); commit() costs an fsync of the file and, unless deferred, one of its directory.
 #pragma once
 
 #include <cstddef>
 #include <ostream>
+#include <span>
 #include <streambuf>
 #include <string>
 #include <string_view>
 
 namespace fastslam::tools {
+
+// Whether commit() syncs the target's directory (the rename's durability) or leaves it to a
+// later sync_directory() of that directory.
+enum class DirectorySync { kNow, kDeferred };
 
 class AtomicFile {
  public:
@@ -35,9 +44,14 @@ class AtomicFile {
   std::ostream& stream() { return stream_; }
   // Hands the buffer to the kernel. Throws as write().
   void flush();
-  // Flushes, fsyncs, closes and renames onto the target. Throws std::runtime_error naming the
-  // target and the reason; the temporary is removed then.
-  void commit();
+  // Flushes and asks the kernel to start writing the text to the disk without waiting for it,
+  // so that the fsync of a later commit() overlaps with other files' (Linux; elsewhere only
+  // flushes). Throws as write().
+  void start_writeback();
+  // Flushes, fsyncs, closes and renames onto the target, then (kNow) syncs the target's
+  // directory. Throws std::runtime_error naming the target and the reason; the temporary is
+  // removed then.
+  void commit(DirectorySync directory = DirectorySync::kNow);
   // Removes the temporary; the target is left as it was. Idempotent.
   void discard();
 
@@ -76,6 +90,11 @@ class AtomicFile {
 // Removes the temporaries of `path` (its target) that processes no longer running left (a run
 // killed with SIGKILL cannot remove its own). Costs one listing of the target's directory.
 void remove_abandoned_temporaries(const std::string& path);
+
+// Syncs, once each, the directories that hold `targets` (AtomicFile::target() of files
+// committed with DirectorySync::kDeferred), so that their renames reach the disk. Best effort,
+// as commit()'s own: a directory that cannot be opened or synced is left as it is.
+void sync_directories(std::span<const std::string> targets);
 
 // Writes `text` to `path` as one AtomicFile.
 void write_file_atomically(const std::string& path, std::string_view text);

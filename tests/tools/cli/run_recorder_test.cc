@@ -1,11 +1,14 @@
 #include "tools/cli/run_recorder.h"
 
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
+#include <sys/resource.h>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -99,6 +102,71 @@ TEST_F(RunRecorderTest, WritesEveryPoseInOrderAsPrintfWould) {
   for (const auto& entry : fs::directory_iterator(dir_)) {
     EXPECT_NE(entry.path().filename().string()[0], '.') << "a temporary is left";
   }
+}
+
+// A file size limit makes write(2) fail with EFBIG, as a full disk fails with ENOSPC.
+class FileSizeLimit {
+ public:
+  explicit FileSizeLimit(rlim_t bytes) {
+    previous_handler_ = std::signal(SIGXFSZ, SIG_IGN);
+    ::getrlimit(RLIMIT_FSIZE, &previous_);
+    rlimit limit = previous_;
+    limit.rlim_cur = bytes;
+    ok_ = ::setrlimit(RLIMIT_FSIZE, &limit) == 0;
+  }
+  ~FileSizeLimit() {
+    ::setrlimit(RLIMIT_FSIZE, &previous_);
+    std::signal(SIGXFSZ, previous_handler_);
+  }
+  bool ok() const { return ok_; }
+
+ private:
+  rlimit previous_{};
+  void (*previous_handler_)(int) = nullptr;
+  bool ok_ = false;
+};
+
+// The TUM file outgrows a size limit the CSV files stay under: the run learns of it while it
+// goes (as of a full disk), and finish(), called after such a failure as after any, reports it
+// once, naming it, leaves nothing of it behind and writes the other files whole.
+TEST_F(RunRecorderTest, AFileThatFailsIsReportedAndTheOthersStand) {
+  constexpr int kPoses = 9001;
+  RecordedRun run;
+  std::string during;
+  {
+    const FileSizeLimit limit(500000);
+    ASSERT_TRUE(limit.ok());
+    RunRecorder recorder(LogHeader{}, engine::SensorOffset{}, dir_.string(), 10.0);
+    try {
+      feed(recorder, kPoses);
+    } catch (const std::runtime_error& e) {
+      during = e.what();
+    }
+    run = recorder.finish();
+  }
+  EXPECT_NE(during.find("trajectory.tum: write failed: File too large"), std::string::npos)
+      << during;
+  ASSERT_EQ(run.errors.size(), 1u);
+  EXPECT_NE(run.errors[0].find("trajectory.tum: write failed: File too large"), std::string::npos)
+      << run.errors[0];
+  EXPECT_EQ(run.files,
+            (std::vector<std::string>{"trajectory.csv", "truth.csv", "dead_reckoning.csv"}));
+  EXPECT_FALSE(fs::exists(dir_ / "trajectory.tum"));
+  // Whole up to where the run stopped: the poses handed over until then, in order.
+  const std::vector<std::string> trajectory = lines(dir_ / "trajectory.csv");
+  EXPECT_GT(trajectory.size(), 1000u);
+  for (std::size_t k = 1; k < trajectory.size(); ++k) {
+    const double x = 40.0 * std::cos(0.003 * (k - 1)) - 20.0, y = -15.0 * std::sin(0.007 * (k - 1));
+    ASSERT_EQ(trajectory[k], printf_pose(0.025 * k, x + 0.1, y - 0.2,
+                                         std::remainder(0.003 * (k - 1), 2 * M_PI) + 1e-3))
+        << "pose " << k - 1;
+  }
+  EXPECT_GE(lines(dir_ / "truth.csv").size(), trajectory.size());
+  EXPECT_GE(lines(dir_ / "dead_reckoning.csv").size(), trajectory.size());
+  for (const auto& entry : fs::directory_iterator(dir_)) {
+    EXPECT_NE(entry.path().filename().string()[0], '.') << "a temporary is left";
+  }
+  ASSERT_TRUE(run.filter.truth.has_value());  // the scores do not depend on the files
 }
 
 // A recorder dropped without finish() (a run that threw) leaves no file and no temporary

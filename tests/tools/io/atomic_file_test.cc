@@ -71,6 +71,35 @@ TEST_F(AtomicFileTest, AppearsOnlyAtCommit) {
   EXPECT_EQ(names(), std::vector<std::string>{"out.csv"});
 }
 
+// Several files into one directory: writeback started before the commits, each commit leaving
+// the directory's sync to one sync_directories call; the text and the names are as with commit().
+TEST_F(AtomicFileTest, CommitsWithTheDirectorySyncDeferredPutEveryFileInPlace) {
+  fs::create_directories(dir_ / "sub");
+  std::vector<std::string> targets;
+  {
+    AtomicFile a(path("a.csv")), b(path("b.csv")), c(path("sub/c.csv"));
+    const std::string big(200000, 'x');
+    a.write(big);
+    a.write("\n");
+    b.write("b\n");
+    c.write("c\n");
+    for (AtomicFile* f : {&a, &b, &c}) f->start_writeback();
+    EXPECT_FALSE(fs::exists(path("a.csv")));
+    b.write("more\n");  // text after the writeback started is kept
+    for (AtomicFile* f : {&a, &b, &c}) {
+      f->commit(DirectorySync::kDeferred);
+      targets.push_back(f->target());
+    }
+  }
+  targets.push_back(path("a.csv"));                // a directory named twice is synced once
+  targets.push_back(path("no such directory/d"));  // one that cannot be opened is skipped
+  sync_directories(targets);
+  EXPECT_EQ(read(path("a.csv")), std::string(200000, 'x') + "\n");
+  EXPECT_EQ(read(path("b.csv")), "b\nmore\n");
+  EXPECT_EQ(read(path("sub/c.csv")), "c\n");
+  EXPECT_EQ(names(), (std::vector<std::string>{"a.csv", "b.csv", "sub"}));
+}
+
 TEST_F(AtomicFileTest, UncommittedLeavesTheTargetAsItWas) {
   const std::string p = path("metrics.json");
   put(p, "old");
