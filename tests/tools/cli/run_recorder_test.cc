@@ -1,17 +1,17 @@
 #include "tools/cli/run_recorder.h"
 
 #include <cmath>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <sys/resource.h>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "tests/file_size_limit.h"
 
 namespace fastslam::tools {
 namespace {
@@ -104,27 +104,7 @@ TEST_F(RunRecorderTest, WritesEveryPoseInOrderAsPrintfWould) {
   }
 }
 
-// A file size limit makes write(2) fail with EFBIG, as a full disk fails with ENOSPC.
-class FileSizeLimit {
- public:
-  explicit FileSizeLimit(rlim_t bytes) {
-    previous_handler_ = std::signal(SIGXFSZ, SIG_IGN);
-    ::getrlimit(RLIMIT_FSIZE, &previous_);
-    rlimit limit = previous_;
-    limit.rlim_cur = bytes;
-    ok_ = ::setrlimit(RLIMIT_FSIZE, &limit) == 0;
-  }
-  ~FileSizeLimit() {
-    ::setrlimit(RLIMIT_FSIZE, &previous_);
-    std::signal(SIGXFSZ, previous_handler_);
-  }
-  bool ok() const { return ok_; }
-
- private:
-  rlimit previous_{};
-  void (*previous_handler_)(int) = nullptr;
-  bool ok_ = false;
-};
+using fastslam::testing::FileSizeLimit;
 
 // The TUM file outgrows a size limit the CSV files stay under: the run learns of it while it
 // goes (as of a full disk), and finish(), called after such a failure as after any, reports it

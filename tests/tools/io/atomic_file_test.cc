@@ -1,18 +1,18 @@
 #include "tools/io/atomic_file.h"
 
 #include <algorithm>
-#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "tests/file_size_limit.h"
 
 namespace fastslam::tools {
 namespace {
@@ -176,27 +176,7 @@ TEST_F(AtomicFileTest, AMissingDirectoryIsReportedAtOpening) {
   EXPECT_NE(message.find("No such file or directory"), std::string::npos);
 }
 
-// A file size limit makes write(2) fail with EFBIG, as a full disk fails with ENOSPC.
-class FileSizeLimit {
- public:
-  explicit FileSizeLimit(rlim_t bytes) {
-    previous_handler_ = std::signal(SIGXFSZ, SIG_IGN);
-    ::getrlimit(RLIMIT_FSIZE, &previous_);
-    rlimit limit = previous_;
-    limit.rlim_cur = bytes;
-    ok_ = ::setrlimit(RLIMIT_FSIZE, &limit) == 0;
-  }
-  ~FileSizeLimit() {
-    ::setrlimit(RLIMIT_FSIZE, &previous_);
-    std::signal(SIGXFSZ, previous_handler_);
-  }
-  bool ok() const { return ok_; }
-
- private:
-  rlimit previous_{};
-  void (*previous_handler_)(int) = nullptr;
-  bool ok_ = false;
-};
+using fastslam::testing::FileSizeLimit;
 
 TEST_F(AtomicFileTest, AFailedWriteThrowsWhenItHappensAndLeavesNothing) {
   const std::string p = path("trajectory.csv");
