@@ -7,7 +7,9 @@
 #include <functional>
 #include <future>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
+#include <string>
 #include <string_view>
 #include <system_error>
 #include <thread>
@@ -16,6 +18,24 @@
 #include "tools/io/number_text.h"
 
 namespace fastslam::tools {
+
+// A task's outcome: the message of the exception it threw, or nothing. The exception itself
+// stays on the thread that threw it; the waiting thread raises its own std::runtime_error of
+// the message, so no exception object is shared between the threads.
+namespace {
+
+using TaskError = std::optional<std::string>;
+
+TaskError attempt(const std::function<void()>& task) {
+  try {
+    task();
+    return std::nullopt;
+  } catch (const std::exception& e) {
+    return std::string(e.what());
+  }
+}
+
+}  // namespace
 
 // The thread that writes the files: the tasks run one at a time in the order given, so each
 // file's batches stay in order. Destroyed after the files (each waits for its last task).
@@ -33,9 +53,9 @@ class RunRecorder::Writer {
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
-  std::future<void> run(std::function<void()> task) {
-    std::packaged_task<void()> job(std::move(task));
-    std::future<void> done = job.get_future();
+  std::future<TaskError> run(std::function<void()> task) {
+    std::packaged_task<TaskError()> job([task = std::move(task)] { return attempt(task); });
+    std::future<TaskError> done = job.get_future();
     {
       const std::lock_guard<std::mutex> lock(mutex_);
       queue_.push_back(std::move(job));
@@ -47,7 +67,7 @@ class RunRecorder::Writer {
  private:
   void loop() {
     for (;;) {
-      std::packaged_task<void()> job;
+      std::packaged_task<TaskError()> job;
       {
         std::unique_lock<std::mutex> lock(mutex_);
         ready_.wait(lock, [&] { return stop_ || !queue_.empty(); });
@@ -55,13 +75,13 @@ class RunRecorder::Writer {
         job = std::move(queue_.front());
         queue_.pop_front();
       }
-      job();  // its exception goes to its future
+      job();
     }
   }
 
   std::mutex mutex_;
   std::condition_variable ready_;
-  std::deque<std::packaged_task<void()>> queue_;
+  std::deque<std::packaged_task<TaskError()>> queue_;
   bool stop_ = false;
   std::thread thread_;  // last: started once the rest is built
 };
@@ -118,7 +138,8 @@ class RunRecorder::PoseFile {
   enum class Stage { kBatch, kWriteback, kCommit };
 
   void wait() {
-    if (job_.valid()) job_.get();  // rethrows the task's error
+    if (!job_.valid()) return;
+    if (const TaskError error = job_.get()) throw std::runtime_error(*error);
   }
 
   void hand_over(Stage stage) {
@@ -138,9 +159,9 @@ class RunRecorder::PoseFile {
       job_ = writer_->run(std::move(task));
     } else {
       // No thread: the task runs here, its error kept for the next step as the writer's is.
-      std::packaged_task<void()> job(std::move(task));
-      job_ = job.get_future();
-      job();
+      std::promise<TaskError> done;
+      done.set_value(attempt(task));
+      job_ = done.get_future();
     }
   }
 
@@ -166,7 +187,7 @@ class RunRecorder::PoseFile {
   // Used by the task only.
   std::string chunk_;
   TextLine text_;
-  std::future<void> job_;  // last: waited for before the rest goes
+  std::future<TaskError> job_;  // last: waited for before the rest goes
 };
 
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
