@@ -7,7 +7,8 @@
 // control (TrajectorySums::add). Under the composed motion (odometry models) the pass's runs
 // (engine/motion_run.h, composed once per pass) move each lane once per run: 1.0 by three
 // normals of stream (seed, the run's last step, particle, kMotionRun and kMotionRunHeading),
-// 2.0 by the run's mean and covariance; the points inside a run come from its start's sums.
+// 2.0 by the run's mean and covariance; the sums are added at the runs' starts and ends only
+// (the recorder moves a run's start to the points inside it).
 // Thread safety: concurrent calls on disjoint blocks with distinct scratch are safe. Costs:
 // O(count K) for K queued controls; no allocation once the scratch has grown.
 #pragma once
@@ -35,7 +36,6 @@ struct MotionScratch {
   std::vector<double> weights;  // the block's lanes' weights while recording the trajectory
   std::vector<ControlStep> steps;
   std::vector<std::uint64_t> keys;
-  std::vector<double> base;  // the composed motion's group sums at a run's start
 };
 
 // What the motion stage reads besides the particles.
@@ -90,19 +90,12 @@ inline void advance_composed(const MotionInput& in, std::size_t begin, std::size
   double* const n2 = n1 + lanes;
   double* const spare = n2 + lanes;
   const auto first = in.first_particle + static_cast<std::uint32_t>(begin);
-  if (record != nullptr) scratch.base.resize(lanes / kMotionLanes * TrajectorySums::kTerms);
-  // The groups' sums at a run's start: the previous run's last point's, once there is one.
-  const double* base = nullptr;
   for (const MotionRun& run : in.runs) {
     const std::size_t last = run.first + run.count - 1;
-    if (record != nullptr && run.count > 1) {
-      if (base == nullptr) {
-        TrajectorySums::group_sums(lanes, x, y, theta, w, scratch.base.data());
-        base = scratch.base.data();
-      }
-      for (std::size_t k = run.first; k < last; ++k) {
-        record->add_displaced(k, begin, lanes, base, in.partial[k].data());
-      }
+    // The points inside a run come from its start's sums (TrajectoryRecorder::finish): the
+    // pass's start for the first run, the previous run's end for the others.
+    if (record != nullptr && run.count > 1 && run.first == 0) {
+      record->add_start(begin, lanes, x, y, theta, w);
     }
     if (cov != nullptr) {
       predict_run_covariance(run, lanes, theta, cov);
@@ -116,10 +109,7 @@ inline void advance_composed(const MotionInput& in, std::size_t begin, std::size
                                            std::span(spare, lanes));
       apply_run(run, lanes, x, y, theta, n0, n1, n2);
     }
-    if (record != nullptr) {
-      record->add(last, begin, lanes, x, y, theta, w);
-      base = record->sums + (last * record->groups + begin / kMotionLanes) * TrajectorySums::kTerms;
-    }
+    if (record != nullptr) record->add(last, begin, lanes, x, y, theta, w);
   }
 }
 

@@ -135,7 +135,7 @@ class ParticlePass final : public Pass {
         1);
     heavy_ = std::accumulate(block_seconds_.begin(), block_seconds_.end(), 0.0) >
              s_.config.split_seconds;
-    if (in.record) recorder_.finish(queued, s_.counters.controls - queued);
+    if (in.record) recorder_.finish(queued, s_.counters.controls - queued, runs_, partial_);
     s_.pending.clear();
   }
 

@@ -64,24 +64,13 @@ void TrajectorySums::group_sums(std::size_t lanes, const double* x, const double
 void TrajectorySums::add(std::size_t k, std::size_t begin, std::size_t lanes, const double* x,
                          const double* y, const double* theta, const double* w) const {
   assert(begin % kG == 0 && lanes % kG == 0);
-  group_sums(lanes, x, y, theta, w, sums + (k * groups + begin / kG) * kT);
+  group_sums(lanes, x, y, theta, w, sums + ((k + 1) * groups + begin / kG) * kT);
 }
 
-void TrajectorySums::add_displaced(std::size_t k, std::size_t begin, std::size_t lanes,
-                                   const double* base, const double d[3]) const {
+void TrajectorySums::add_start(std::size_t begin, std::size_t lanes, const double* x,
+                               const double* y, const double* theta, const double* w) const {
   assert(begin % kG == 0 && lanes % kG == 0);
-  double* out = sums + (k * groups + begin / kG) * kT;
-  double c = 0.0;
-  double s = 0.0;
-  parallel::sincos(d[2], c, s);
-  for (std::size_t g = 0; g < lanes / kG; ++g, base += kT, out += kT) {
-    // Each lane's position moves by R(theta) (d0, d1): summed, by the weighted cos and sin.
-    out[0] = base[0];
-    out[1] = base[1] + (d[0] * base[3] - d[1] * base[4]);
-    out[2] = base[2] + (d[0] * base[4] + d[1] * base[3]);
-    out[3] = c * base[3] - s * base[4];
-    out[4] = s * base[3] + c * base[4];
-  }
+  group_sums(lanes, x, y, theta, w, sums + (begin / kG) * kT);
 }
 
 void TrajectoryRecorder::begin(std::span<const double> log_weight, std::size_t controls) {
@@ -90,20 +79,33 @@ void TrajectoryRecorder::begin(std::span<const double> log_weight, std::size_t c
     for (const double m : parallel::all_gather_value(*group_, max_lw)) max_lw = std::max(max_lw, m);
   }
   const std::size_t groups = (log_weight.size() + kG - 1) / kG;
-  // Every entry is written by the motion stage (TrajectorySums::add): no need to clear it.
-  sums_.resize(controls * groups * kT);
+  // The motion stage writes the slots finish() reads (TrajectorySums::add, add_start): no need
+  // to clear them.
+  sums_.resize((controls + 1) * groups * kT);
   view_ = {log_weight, max_lw, groups, sums_.data()};
 }
 
-void TrajectoryRecorder::finish(std::size_t controls, std::uint64_t first_control) {
+void TrajectoryRecorder::finish(std::size_t controls, std::uint64_t first_control,
+                                std::span<const MotionRun> runs,
+                                std::span<const Eigen::Vector3d> partial) {
   using Sums = std::array<double, kT>;
-  std::vector<Sums> total(controls, Sums{});
-  // Control k's groups folded in the set's order: this process's, or rank by rank.
+  // The slots to fold: each control's own, or (composed) each run's start and end.
+  std::vector<std::size_t> slots;
+  if (runs.empty()) {
+    for (std::size_t k = 0; k < controls; ++k) slots.push_back(k + 1);
+  } else {
+    for (const MotionRun& run : runs) {
+      if (run.count > 1 && (slots.empty() || slots.back() != run.first)) slots.push_back(run.first);
+      slots.push_back(run.first + run.count);
+    }
+  }
+  std::vector<Sums> total(controls + 1, Sums{});
+  // Each slot's groups folded in the set's order: this process's, or rank by rank.
   auto fold = [&](const double* sums, std::size_t groups) {
-    for (std::size_t k = 0; k < controls; ++k) {
+    for (const std::size_t slot : slots) {
       for (std::size_t g = 0; g < groups; ++g) {
-        const double* s = sums + (k * groups + g) * kT;
-        for (std::size_t t = 0; t < kT; ++t) total[k][t] += s[t];
+        const double* s = sums + (slot * groups + g) * kT;
+        for (std::size_t t = 0; t < kT; ++t) total[slot][t] += s[t];
       }
     }
   };
@@ -117,13 +119,31 @@ void TrajectoryRecorder::finish(std::size_t controls, std::uint64_t first_contro
     for (const std::size_t bytes : sizes) {
       rank_sums.resize(bytes / sizeof(double));
       std::memcpy(rank_sums.data(), all.data() + at, bytes);
-      fold(rank_sums.data(), controls == 0 ? 0 : rank_sums.size() / kT / controls);
+      fold(rank_sums.data(), rank_sums.size() / kT / (controls + 1));
       at += bytes;
     }
   }
-  for (std::size_t k = 0; k < controls; ++k) {
-    const Sums& s = total[k];
+  auto point = [&](std::size_t k, const Sums& s) {
     points_.push_back({first_control + k, s[1] / s[0], s[2] / s[0], std::atan2(s[4], s[3])});
+  };
+  if (runs.empty()) {
+    for (std::size_t k = 0; k < controls; ++k) point(k, total[k + 1]);
+    return;
+  }
+  for (const MotionRun& run : runs) {
+    const std::size_t last = run.first + run.count - 1;
+    const Sums& b = total[run.first];
+    for (std::size_t k = run.first; k < last; ++k) {
+      // Each lane's position moves by R(theta) (d0, d1) and its heading by d2: the sums move
+      // by the weighted cos and sin.
+      const Eigen::Vector3d& d = partial[k];
+      double c = 0.0;
+      double s = 0.0;
+      parallel::sincos(d[2], c, s);
+      point(k, {b[0], b[1] + (d[0] * b[3] - d[1] * b[4]), b[2] + (d[0] * b[4] + d[1] * b[3]),
+                c * b[3] - s * b[4], s * b[3] + c * b[4]});
+    }
+    point(last, total[last + 1]);
   }
 }
 

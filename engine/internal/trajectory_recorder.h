@@ -8,11 +8,14 @@
 // holds whole groups too, takes the set's largest log-weight and folds every rank's groups in
 // rank order, so every rank records the points one process would. Owns the group sums and the
 // points not yet taken; borrows the group.
-// Under the composed motion draw the points between a run's start and its end are the start's
-// sums moved by the run's mean displacement (add_displaced), O(1) per group and control.
+// Under the composed motion draw the motion stage adds the sums only at each run's start and
+// end; `finish` folds a run's start once and moves the total by the run's mean displacement
+// for each control inside it (every lane moves by the same displacement, so the sums move as
+// one): O(1) per control.
 // Thread safety: thread-compatible; the motion stage adds disjoint groups concurrently. Costs:
-// per control and lane a sincos and five multiply-adds in the motion stage; finish O(M K / 8)
-// for K controls; the sums (5 M K / 8 doubles) are reused.
+// per added control and lane a sincos and five multiply-adds in the motion stage; finish
+// O(M S / 8 + K) for K controls of which S were added; the sums (5 M K / 8 doubles) are
+// reused.
 #pragma once
 
 #include <cstddef>
@@ -20,7 +23,10 @@
 #include <span>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "engine/filter.h"
+#include "engine/motion_run.h"
 #include "parallel/collective.h"
 
 namespace fastslam::engine::internal {
@@ -34,7 +40,9 @@ struct TrajectorySums {
   std::span<const double> log_weight;  // the local particles'
   double shift = 0.0;                  // the set's largest log-weight: w = exp(l - shift)
   std::size_t groups = 0;              // lane groups of the local particles
-  double* sums = nullptr;              // control k, group g, term t at [(k groups + g) kTerms + t]
+  // Slot s, group g, term t at [(s groups + g) kTerms + t]: slot 0 holds the pass's start
+  // (add_start), slot k + 1 the poses after control k (add).
+  double* sums = nullptr;
 
   // The weights of lanes [begin, begin + lanes) to w (0 past the last particle).
   // REQUIRES: begin % kGroup == 0, lanes % kGroup == 0.
@@ -44,12 +52,10 @@ struct TrajectorySums {
   // REQUIRES: as weights().
   void add(std::size_t k, std::size_t begin, std::size_t lanes, const double* x, const double* y,
            const double* theta, const double* w) const;
-  // The composed motion draw (engine/motion_run.h): the sums after control k of the lanes moved
-  // from their run's start by the run's mean displacement d (each position by R(theta) (d0,
-  // d1), each heading by d2), computed from `base`, the groups' sums at the start (kTerms per
-  // group, as group_sums writes them), without reading a lane. REQUIRES: as weights().
-  void add_displaced(std::size_t k, std::size_t begin, std::size_t lanes, const double* base,
-                     const double d[3]) const;
+  // The same at the pass's start, before its first control: the composed motion draw's first
+  // run reads it (TrajectoryRecorder::finish).
+  void add_start(std::size_t begin, std::size_t lanes, const double* x, const double* y,
+                 const double* theta, const double* w) const;
   // The groups' sums of lanes [0, lanes) into out (kTerms per group), as add() computes them.
   static void group_sums(std::size_t lanes, const double* x, const double* y, const double* theta,
                          const double* w, double* out);
@@ -65,8 +71,12 @@ class TrajectoryRecorder {
   void begin(std::span<const double> log_weight, std::size_t controls);
   // Where the motion stage adds its groups' sums (valid until the next begin).
   const TrajectorySums& sums() const { return view_; }
-  // Appends one point per control; the first is control number `first_control`.
-  void finish(std::size_t controls, std::uint64_t first_control);
+  // Appends one point per control; the first is control number `first_control`. `runs` and
+  // `partial`: the composed motion draw's runs of the pass and each control's mean displacement
+  // from its run's start (engine/motion_run.h), when the motion stage added the sums only at
+  // the runs' starts and ends; empty when it added them after every control.
+  void finish(std::size_t controls, std::uint64_t first_control,
+              std::span<const MotionRun> runs = {}, std::span<const Eigen::Vector3d> partial = {});
 
   // The points recorded and not taken yet (saved with the state).
   std::vector<TrajectoryPoint>& points() { return points_; }

@@ -456,7 +456,7 @@ TEST(FilterComposedDrawTest, AutoComposesWhereTheMotionComposes) {
 }
 
 // Between scans the recorded trajectory is the weighted mean of each particle moved from the
-// run's start by the run's mean displacement (what TrajectorySums::add_displaced computes
+// run's start by the run's mean displacement (what TrajectoryRecorder::finish computes
 // without reading a lane), against a brute-force sum over the particles saved after each scan.
 TEST(FilterComposedDrawTest, TrajectoryInsideARunIsTheMeanDisplacementOfItsStart) {
   const Scenario& s = loop_scenario();

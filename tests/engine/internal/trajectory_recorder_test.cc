@@ -1,9 +1,10 @@
-// The trajectory recorder against a direct weighted mean (long double sums), and its
-// independence of how the motion stage splits the lanes into blocks (the groups are fixed) and
-// of the controls beside a control in a pass. The ranks' fold is checked against one process in
-// distributed_filter_test.
+// The trajectory recorder against a direct weighted mean (long double sums), also inside the
+// composed motion's runs, and its independence of how the motion stage splits the lanes into
+// blocks (the groups are fixed) and of the controls beside a control in a pass. The ranks' fold is
+// checked against one process in distributed_filter_test.
 #include "engine/internal/trajectory_recorder.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -107,6 +108,105 @@ TEST(TrajectoryRecorderTest, AControlsPointIsTheSameWhateverThePassHolds) {
         EXPECT_EQ(all[k + 1].y, one.y);
         EXPECT_EQ(all[k + 1].theta, one.theta);
       }
+    }
+  }
+}
+
+// The composed motion draw: the motion stage adds the sums at the pass's start and at each
+// run's last control only, and the points inside a run are its start's weighted mean moved by
+// the run's mean displacement: against brute force (long double, every particle moved), and
+// bit-identical for any block split.
+std::vector<TrajectoryPoint> record_runs(const std::vector<double>& log_weight,
+                                         const std::vector<std::vector<double>>& ends,
+                                         const std::vector<MotionRun>& runs,
+                                         const std::vector<Eigen::Vector3d>& partial,
+                                         const std::vector<std::size_t>& cuts) {
+  TrajectoryRecorder recorder;
+  recorder.begin(log_weight, partial.size());
+  const TrajectorySums& sums = recorder.sums();
+  for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
+    const std::size_t begin = cuts[c];
+    const std::size_t lanes = (cuts[c + 1] - begin + kG - 1) / kG * kG;
+    std::vector<double> w(lanes);
+    sums.weights(begin, lanes, w.data());
+    // ends[0]: the poses at the pass's start; ends[r + 1]: after run r.
+    auto lanes_of = [&](const std::vector<double>& poses, std::vector<double>& x,
+                        std::vector<double>& y, std::vector<double>& theta) {
+      x.assign(lanes, 0.0);
+      y.assign(lanes, 0.0);
+      theta.assign(lanes, 0.0);
+      for (std::size_t l = 0; begin + l < cuts[c + 1]; ++l) {
+        x[l] = poses[(begin + l) * 3];
+        y[l] = poses[(begin + l) * 3 + 1];
+        theta[l] = poses[(begin + l) * 3 + 2];
+      }
+    };
+    std::vector<double> x, y, theta;
+    lanes_of(ends[0], x, y, theta);
+    sums.add_start(begin, lanes, x.data(), y.data(), theta.data(), w.data());
+    for (std::size_t r = 0; r < runs.size(); ++r) {
+      lanes_of(ends[r + 1], x, y, theta);
+      sums.add(runs[r].first + runs[r].count - 1, begin, lanes, x.data(), y.data(), theta.data(),
+               w.data());
+    }
+  }
+  recorder.finish(partial.size(), 3, runs, partial);
+  return recorder.points();
+}
+
+TEST(TrajectoryRecorderTest, APointInsideARunIsItsStartMovedByTheMeanDisplacement) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<MotionRun> runs(3);
+  runs[0].first = 0, runs[0].count = 4;
+  runs[1].first = 4, runs[1].count = 1;
+  runs[2].first = 5, runs[2].count = 3;
+  const std::size_t controls = 8;
+  for (const std::size_t m : {1u, 9u, 64u, 301u}) {
+    std::vector<double> log_weight(m);
+    for (double& l : log_weight) l = 10 * u(rng);
+    std::vector<std::vector<double>> ends(runs.size() + 1, std::vector<double>(3 * m));
+    for (std::vector<double>& poses : ends) {
+      for (double& p : poses) p = 20 * u(rng);
+    }
+    std::vector<Eigen::Vector3d> partial(controls);
+    for (Eigen::Vector3d& d : partial) d = {2 * u(rng), 0.5 * u(rng), 0.3 * u(rng)};
+    const std::vector<TrajectoryPoint> got = record_runs(log_weight, ends, runs, partial, {0, m});
+    ASSERT_EQ(got.size(), controls);
+    const double best = *std::max_element(log_weight.begin(), log_weight.end());
+    for (std::size_t r = 0; r < runs.size(); ++r) {
+      const std::size_t last = runs[r].first + runs[r].count - 1;
+      for (std::size_t k = runs[r].first; k <= last; ++k) {
+        // Inside the run: each particle of the run's start moved by partial[k]; at its last
+        // control: the poses after the run.
+        const std::vector<double>& from = k < last ? ends[r] : ends[r + 1];
+        const Eigen::Vector3d d = k < last ? partial[k] : Eigen::Vector3d::Zero();
+        long double w = 0, x = 0, y = 0, c = 0, s = 0;
+        for (std::size_t i = 0; i < m; ++i) {
+          const long double wi = std::exp(static_cast<long double>(log_weight[i] - best));
+          const long double th = from[i * 3 + 2];
+          w += wi;
+          x += wi * (from[i * 3] + std::cos(th) * d[0] - std::sin(th) * d[1]);
+          y += wi * (from[i * 3 + 1] + std::sin(th) * d[0] + std::cos(th) * d[1]);
+          c += wi * std::cos(th + d[2]);
+          s += wi * std::sin(th + d[2]);
+        }
+        const TrajectoryPoint& p = got[k];
+        EXPECT_EQ(p.control, 3 + k);
+        EXPECT_NEAR(p.x, static_cast<double>(x / w), 1e-11) << "m " << m << " k " << k;
+        EXPECT_NEAR(p.y, static_cast<double>(y / w), 1e-11) << "m " << m << " k " << k;
+        EXPECT_NEAR(p.theta, static_cast<double>(std::atan2(s, c)), 1e-12) << "m " << m;
+      }
+    }
+    std::vector<std::size_t> eights = {0};
+    for (std::size_t at = kG; at < m; at += kG) eights.push_back(at);
+    eights.push_back(m);
+    const std::vector<TrajectoryPoint> split = record_runs(log_weight, ends, runs, partial, eights);
+    ASSERT_EQ(split.size(), controls);
+    for (std::size_t k = 0; k < controls; ++k) {
+      EXPECT_EQ(split[k].x, got[k].x);
+      EXPECT_EQ(split[k].y, got[k].y);
+      EXPECT_EQ(split[k].theta, got[k].theta);
     }
   }
 }
