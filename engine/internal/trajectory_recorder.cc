@@ -34,9 +34,14 @@ void TrajectorySums::weights(std::size_t begin, std::size_t lanes, double* w) co
   assert(begin % kG == 0 && lanes % kG == 0);
   const std::size_t real =
       begin < log_weight.size() ? std::min(lanes, log_weight.size() - begin) : 0;
-  // shift is the largest log-weight; exp_nonpositive gives the same bits with any C library.
-  for (std::size_t l = 0; l < real; ++l) {
-    w[l] = parallel::exp_nonpositive(log_weight[begin + l] - shift);
+  // shift is the largest log-weight; exp_nonpositive gives the same bits with any C library
+  // (and exactly 1 at 0, which a uniform set skips computing).
+  if (uniform) {
+    std::fill(w, w + real, 1.0);
+  } else {
+    for (std::size_t l = 0; l < real; ++l) {
+      w[l] = parallel::exp_nonpositive(log_weight[begin + l] - shift);
+    }
   }
   std::fill(w + real, w + lanes, 0.0);
 }
@@ -74,7 +79,8 @@ void TrajectorySums::add_start(std::size_t begin, std::size_t lanes, const doubl
 }
 
 void TrajectoryRecorder::begin(std::span<const double> log_weight, std::size_t controls) {
-  double max_lw = *std::max_element(log_weight.begin(), log_weight.end());
+  const auto [low, high] = std::minmax_element(log_weight.begin(), log_weight.end());
+  double max_lw = *high;
   if (group_ != nullptr) {
     for (const double m : parallel::all_gather_value(*group_, max_lw)) max_lw = std::max(max_lw, m);
   }
@@ -82,7 +88,7 @@ void TrajectoryRecorder::begin(std::span<const double> log_weight, std::size_t c
   // The motion stage writes the slots finish() reads (TrajectorySums::add, add_start): no need
   // to clear them.
   sums_.resize((controls + 1) * groups * kT);
-  view_ = {log_weight, max_lw, groups, sums_.data()};
+  view_ = {log_weight, max_lw, groups, *low == max_lw, sums_.data()};
 }
 
 void TrajectoryRecorder::finish(std::size_t controls, std::uint64_t first_control,

@@ -40,6 +40,8 @@ struct TrajectorySums {
   std::span<const double> log_weight;  // the local particles'
   double shift = 0.0;                  // the set's largest log-weight: w = exp(l - shift)
   std::size_t groups = 0;              // lane groups of the local particles
+  // Every local log-weight equals `shift` (as after a resampling): every w is exp(0) = 1.
+  bool uniform = false;
   // Slot s, group g, term t at [(s groups + g) kTerms + t]: slot 0 holds the pass's start
   // (add_start), slot k + 1 the poses after control k (add).
   double* sums = nullptr;

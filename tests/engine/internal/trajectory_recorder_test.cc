@@ -12,6 +12,8 @@
 
 #include <gtest/gtest.h>
 
+#include "parallel/vector_math.h"
+
 namespace fastslam::engine::internal {
 namespace {
 
@@ -223,6 +225,17 @@ TEST(TrajectoryRecorderTest, WeightsOfABlock) {
   std::vector<double> w(kG, std::numeric_limits<double>::quiet_NaN());
   sums.weights(kG, kG, w.data());
   for (std::size_t l = 0; l < 3; ++l) EXPECT_EQ(w[l], std::exp(log_weight[kG + l]));
+  for (std::size_t l = 3; l < kG; ++l) EXPECT_EQ(w[l], 0.0);
+  EXPECT_FALSE(sums.uniform);
+  // After a resampling every log-weight is the same: each weight is exp(0) = 1, not computed.
+  const std::vector<double> equal(11, -std::log(11.0));
+  recorder.begin(equal, 1);
+  EXPECT_TRUE(recorder.sums().uniform);
+  recorder.sums().weights(kG, kG, w.data());
+  for (std::size_t l = 0; l < 3; ++l) {
+    EXPECT_EQ(w[l], parallel::exp_nonpositive(equal[kG + l] - recorder.sums().shift));
+    EXPECT_EQ(w[l], 1.0);
+  }
   for (std::size_t l = 3; l < kG; ++l) EXPECT_EQ(w[l], 0.0);
 }
 
