@@ -14,7 +14,7 @@
 // one): O(1) per control.
 // Thread safety: thread-compatible; the motion stage adds disjoint groups concurrently. Costs:
 // per added control and lane a sincos and five multiply-adds in the motion stage; finish
-// O(M S / 8 + K) for K controls of which S were added; the sums (5 M K / 8 doubles) are
+// O(M S / 8 + K) for K controls of which S were added; the sums (5 M (K + 1) / 8 doubles) are
 // reused.
 #pragma once
 
