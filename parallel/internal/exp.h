@@ -39,8 +39,11 @@ inline double exp_nonpositive(double x) noexcept {
   p = std::fma(p, r, 1.0);
   // 2^n from the integer in t's low mantissa bits.
   const std::int64_t ni = std::bit_cast<std::int64_t>(t) - std::bit_cast<std::int64_t>(kShift);
-  const double scale = std::bit_cast<double>(static_cast<std::uint64_t>(ni + 1023) << 52);
-  return x < kMin ? 0.0 : p * scale;
+  // Below kMin the scale is +0, so the product is exactly 0. An integer select, not a select of
+  // the product: GCC does not if-convert a conditional floating-point operation
+  // (-ftrapping-math), and the loops calling this would not vectorise.
+  const std::uint64_t bits = x < kMin ? 0 : static_cast<std::uint64_t>(ni + 1023) << 52;
+  return p * std::bit_cast<double>(bits);
 }
 
 }  // namespace fastslam::parallel::internal
