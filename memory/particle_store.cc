@@ -2,8 +2,6 @@
 
 #include <algorithm>
 #include <cstddef>
-#include <memory>
-#include <new>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -85,45 +83,34 @@ void ParticleStore::append(std::size_t count) {
 
 void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t grain) {
   const std::size_t from_size = size();
-  for (std::size_t k = 0; k < index.size(); ++k) {
-    if (index[k] >= from_size) {
-      throw std::invalid_argument("ParticleStore::gather: index[" + std::to_string(k) +
-                                  "] = " + std::to_string(index[k]) +
-                                  " is not below the particle count " + std::to_string(from_size));
-    }
-  }
   const std::size_t m = index.size();
+  if (m > kNoChild) {
+    throw std::length_error("ParticleStore::gather: " + std::to_string(m) +
+                            " outputs exceed the 32-bit index limit");
+  }
+  // Each input's first output takes its map by a move; the others copy it (bumping the roots'
+  // counts), and an input with no output releases its map. A family of one, the common case,
+  // then costs no count change at all. One serial pass finds the first outputs (and checks the
+  // indices: what may throw comes before anything changes).
+  first_child_.assign(from_size, kNoChild);
+  for (std::size_t k = 0; k < m; ++k) {
+    const std::uint32_t i = index[k];
+    if (i >= from_size) {
+      throw std::invalid_argument("ParticleStore::gather: index[" + std::to_string(k) +
+                                  "] = " + std::to_string(i) + " is not below the particle count " +
+                                  std::to_string(from_size));
+    }
+    if (first_child_[i] == kNoChild) first_child_[i] = static_cast<std::uint32_t>(k);
+  }
   Column nx(m), ny(m), ntheta(m), nv(m), nomega(m), nlog_weight(m);
   const bool carried = options_.pose_covariance == PoseCovariance::kCarried;
   if (carried) pose_cov_spare_.resize(m * kPoseCovStride);
   double* const ncov = pose_cov_spare_.data();
-  // The survivors' maps, made in the first parallel loop and moved out in the second, in raw
-  // blocks: one allocation per gather as large as all the maps would be handed back to the
-  // system by the allocator and fault in fresh pages every time; making (or even marking) every
-  // slot here, one by one, was a sequential part of each resampling. `made` says which exist,
-  // so that an exception from the thread pool leaks none.
-  constexpr std::size_t kMapBlock = 8192;
-  struct alignas(ParticleMap) MapSlot {
-    std::byte bytes[sizeof(ParticleMap)];
-  };
-  std::vector<std::unique_ptr<MapSlot[]>> survivors((m + kMapBlock - 1) / kMapBlock);
-  for (std::unique_ptr<MapSlot[]>& block : survivors) {
-    block = std::make_unique_for_overwrite<MapSlot[]>(kMapBlock);
-  }
-  std::vector<unsigned char> made(m, 0);
-  auto slot = [&](std::size_t k) { return survivors[k / kMapBlock][k % kMapBlock].bytes; };
-  auto survivor = [&](std::size_t k) {
-    return std::launder(reinterpret_cast<ParticleMap*>(slot(k)));
-  };
-  auto unmake = [&] {
-    for (std::size_t k = 0; k < m; ++k) {
-      if (made[k] != 0) survivor(k)->~ParticleMap();
-    }
-  };
-  if (grain == 0) grain = 1;
-  // What may throw comes before the first survivor is made (so no reallocation below).
   if (options_.pose_covariance == PoseCovariance::kScratch) pose_cov_.reserve(m * kPoseCovStride);
-  maps_.reserve(m);
+  // Every entry of the spare is an empty map (the previous gather emptied the maps it held).
+  maps_spare_.resize(m, empty_map());
+  if (grain == 0) grain = 1;
+  const std::uint32_t* const first = first_child_.data();
   try {
     for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
       for (std::size_t k = begin; k != end; ++k) {
@@ -138,40 +125,33 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
           std::copy_n(&pose_cov_[std::size_t{i} * kPoseCovStride], kPoseCovStride,
                       &ncov[k * kPoseCovStride]);
         }
-        ::new (slot(k)) ParticleMap(maps_[i]);  // bumps the roots' counts
-        made[k] = 1;
+        if (first[i] != k) maps_spare_[k] = maps_[i];
       }
     });
-    x_.swap(nx);
-    y_.swap(ny);
-    theta_.swap(ntheta);
-    v_.swap(nv);
-    omega_.swap(nomega);
-    log_weight_.swap(nlog_weight);
-    if (carried) {
-      pose_cov_.swap(pose_cov_spare_);
-    } else if (options_.pose_covariance == PoseCovariance::kScratch) {
-      pose_cov_.resize(m * kPoseCovStride, 0.0);
-    }
-    // The old maps each drop one reference as the survivors replace them (trees no survivor
-    // shares are freed there), in parallel; maps beyond the new count are released first.
-    if (m < from_size) {
-      for_blocks(from_size - m, grain, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t k = begin; k != end; ++k) maps_[m + k].clear();
-      });
-    }
-    maps_.resize(m, empty_map());
-    for_blocks(m, grain, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t k = begin; k != end; ++k) {
-        maps_[k] = std::move(*survivor(k));
-        survivor(k)->~ParticleMap();
-        made[k] = 0;
-      }
-    });
-  } catch (...) {  // only the thread pool's own failures: the loops' bodies do not throw
-    unmake();
+  } catch (...) {  // only the thread pool's own failures: the loop's body does not throw
+    for (ParticleMap& map : maps_spare_) map.clear();
     throw;
   }
+  x_.swap(nx);
+  y_.swap(ny);
+  theta_.swap(ntheta);
+  v_.swap(nv);
+  omega_.swap(nomega);
+  log_weight_.swap(nlog_weight);
+  if (carried) {
+    pose_cov_.swap(pose_cov_spare_);
+  } else if (options_.pose_covariance == PoseCovariance::kScratch) {
+    pose_cov_.resize(m * kPoseCovStride, 0.0);
+  }
+  // Input j's map is touched by its first output's move or, when it has none, by its release:
+  // by one task either way. Trees no output holds are freed here, in parallel.
+  for_blocks(std::max(m, from_size), grain, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t j = begin; j != end; ++j) {
+      if (j < from_size && first[j] == kNoChild) maps_[j].clear();
+      if (j < m && first[index[j]] == j) maps_spare_[j] = std::move(maps_[index[j]]);
+    }
+  });
+  maps_.swap(maps_spare_);
 }
 
 }  // namespace fastslam::memory

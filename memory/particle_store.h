@@ -4,13 +4,15 @@
 // when asked for at construction, each particle's state covariance (kPoseCovStride doubles).
 // The numeric columns are cache-line aligned, so loops over particles vectorise. Resampling is
 // `gather`: particle k of the result is particle index[k] of the input, every column with it
-// (a map by bumping its roots' counts); trees no output particle holds are released, once each.
+// (a map moved to the input's first output and copied, by bumping its roots' counts, to the
+// others); trees no output particle holds are released, once each.
 // Ownership: the store owns its columns and one reference to each particle's map; it borrows
 // the `NodeHeap` (which must outlive it).
 // Thread safety: thread-compatible. Distinct particles (column entries, maps) may be written by
 // distinct threads at once; `gather` needs exclusive use of the store.
 // Costs: column access O(1); `gather` O(M) plus the frees of the maps that die, in parallel
-// over TBB in the caller's arena, allocating the new columns (O(M)).
+// over TBB in the caller's arena after one serial pass over the indices, allocating the new
+// columns (O(M)); it keeps a second vector of M (empty) maps to gather into.
 #pragma once
 
 #include <cstddef>
@@ -80,7 +82,8 @@ class ParticleStore {
 
   // Resampling: afterwards particle k is a copy of former particle index[k], for every k, and
   // the store holds index.size() particles. Throws std::invalid_argument naming the first bad
-  // entry when an index is out of range, and then leaves the store unchanged.
+  // entry when an index is out of range, std::length_error for 2^32 or more outputs, and then
+  // leaves the store unchanged.
   // `grain` is the number of particles per parallel task.
   void gather(std::span<const std::uint32_t> index, std::size_t grain = 256);
 
@@ -91,6 +94,9 @@ class ParticleStore {
   Column pose_cov_;
   Column pose_cov_spare_;  // kCarried: the gather's target, kept to reuse its allocation
   std::vector<ParticleMap> maps_;
+  std::vector<ParticleMap> maps_spare_;  // the gather's target: empty maps between gathers
+  static constexpr std::uint32_t kNoChild = 0xFFFFFFFFu;
+  std::vector<std::uint32_t> first_child_;  // the gather's first output of each input
 };
 
 }  // namespace fastslam::memory
