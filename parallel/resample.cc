@@ -584,21 +584,21 @@ void Resampler::draw(ResampleScheme scheme, std::uint64_t seed, std::uint64_t st
 }
 
 ResampleOutcome Resampler::resample(memory::ParticleStore& store, std::uint64_t seed,
-                                    std::uint64_t step, std::size_t grain_override) {
+                                    std::uint64_t step, std::size_t gather_grain) {
   const std::span<double> log_weight = store.log_weight();
   const WeightSummary summary = summarize(log_weight);
   const std::size_t m = log_weight.size();
   const ParticleKernel& kernel = *kernel_;
-  const std::size_t g = grain_override != 0 ? grain_override : grain();
   if (!should_resample(policy_, summary.effective_sample_size, m)) {
-    subtract_in_place(log_weight, summary.log_sum, kernel, g);
+    subtract_in_place(log_weight, summary.log_sum, kernel, grain());
     ancestors_.clear();
     return {false, summary};
   }
   ancestors_.resize(m);
   draw(policy_.scheme, seed, step, ancestors_);
+  const std::size_t g = gather_grain != 0 ? gather_grain : grain();
   kernel.execute([&] { store.gather(ancestors_, g); });
-  fill_in_place(store.log_weight(), -std::log(static_cast<double>(m)), kernel, g);
+  fill_in_place(store.log_weight(), -std::log(static_cast<double>(m)), kernel, grain());
   return {true, summary};
 }
 

@@ -86,11 +86,11 @@ class Resampler {
   // M ancestors with the policy's scheme from the streams of (seed, step), gather the store
   // (in the kernel's arena; maps no survivor holds are released in parallel) and set every
   // log-weight to -log M; otherwise normalise the log-weights in place (l_i -= log-sum), so
-  // they never drift. `grain` (0: grain()) overrides the grain for this call: a filter whose
-  // step was heavy has many path copies to release and splits its gather finely. Throws as
-  // `summarize` (and then changes nothing), or std::bad_alloc.
+  // they never drift. `gather_grain` (0: grain()) is the gather's: it costs tens of ns per
+  // particle, and more when a heavy step left many path copies to release, where the scans
+  // cost a few. Throws as `summarize` (and then changes nothing), or std::bad_alloc.
   ResampleOutcome resample(memory::ParticleStore& store, std::uint64_t seed, std::uint64_t step,
-                           std::size_t grain = 0);
+                           std::size_t gather_grain = 0);
 
   // `resample` over a shared set, of which `store` holds this rank's share (a collective call):
   // the summary and the decision are the set's; the draw is draw_ranges'; `move(start, ends)`

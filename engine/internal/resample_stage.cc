@@ -13,20 +13,22 @@ namespace fastslam::engine::internal {
 
 ResampleStage::ResampleStage(const FilterConfig& config, const parallel::ParticleKernel& kernel)
     : kernel_(kernel),
-      // Resampling costs nanoseconds per particle: its own grain (the kernel's default), so
-      // that small filters resample inline. The result does not depend on it.
-      resampler_(config.resample, kernel, parallel::KernelConfig{}.grain) {}
+      // The resampler's scans (weights, draw) cost a few ns per particle, less than a task's
+      // hand-off below a few thousand particles: they run inline up to kScanGrain. The result
+      // does not depend on the grain.
+      resampler_(config.resample, kernel, kScanGrain) {}
 
 void ResampleStage::run(FilterState& state, std::uint64_t scan_step, bool heavy) {
   using Clock = std::chrono::steady_clock;
   const Clock::time_point t0 = Clock::now();
   FilterCounters& counters = state.counters;
   try {
-    // After a heavy pass the gather releases many path copies: split it as finely as the pass;
-    // after a light one it stays at the resampler's grain.
+    // The gather costs tens of ns per particle: the kernel's default grain; after a heavy pass
+    // it releases many path copies, split as finely as the pass.
     const std::size_t threads = kernel_.threads();
-    const std::size_t grain =
-        heavy && threads > 1 ? std::max<std::size_t>(1, state.store.size() / (4 * threads)) : 0;
+    const std::size_t grain = heavy && threads > 1
+                                  ? std::max<std::size_t>(1, state.store.size() / (4 * threads))
+                                  : parallel::KernelConfig{}.grain;
     parallel::ResampleOutcome outcome;
     if (state.group == nullptr) {
       outcome = resampler_.resample(state.store, state.config.seed, scan_step, grain);

@@ -26,6 +26,7 @@ class ResampleStage {
   void run(FilterState& state, std::uint64_t scan_step, bool heavy);
 
  private:
+  static constexpr std::size_t kScanGrain = 4096;
   const parallel::ParticleKernel& kernel_;
   parallel::Resampler resampler_;
 };
