@@ -301,13 +301,13 @@ void run_workers(unsigned jobs, const SweepPlan& plan, const std::string& out, u
   for (std::thread& t : workers) t.join();
 }
 
+#ifdef FASTSLAM_HAVE_MPI
 void pause_briefly(int& idle) {
   // From 0.1 ms up to 3.2 ms while nothing comes: answers stay prompt, an idle rank sleeps.
   std::this_thread::sleep_for(std::chrono::microseconds(100 << std::min(idle, 5)));
   idle = std::min(idle + 1, 6);
 }
 
-#ifdef FASTSLAM_HAVE_MPI
 // Rank 0 serves the other ranks' requests while its own workers run.
 void serve(Ranks& ranks, Dispenser& d, const std::atomic<unsigned>& local_running) {
   int ranks_done = 0;

@@ -482,14 +482,14 @@ void put(std::string& line, double v) {
   char buf[32];
   const auto r = std::to_chars(buf, buf + sizeof(buf), v);  // shortest exact form
   line += ' ';
-  line.append(buf, r.ptr);
+  line.append(buf, static_cast<std::size_t>(r.ptr - buf));
 }
 
 void put(std::string& line, std::uint64_t v) {
   char buf[24];
   const auto r = std::to_chars(buf, buf + sizeof(buf), v);
   line += ' ';
-  line.append(buf, r.ptr);
+  line.append(buf, static_cast<std::size_t>(r.ptr - buf));
 }
 
 }  // namespace

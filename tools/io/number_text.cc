@@ -116,11 +116,12 @@ TextLine& TextLine::fixed(double v, int precision) {
   precision = clamp(precision);
   char buf[kBuffer];
   if (precision <= kFastPrecision && std::fabs(v) < 0x1p53) {  // false for NaN
-    line_.append(buf, fixed_exact(buf, v, precision));
+    // (pointer, length): append's iterator-pair form goes through the general replace().
+    line_.append(buf, static_cast<std::size_t>(fixed_exact(buf, v, precision) - buf));
     return *this;
   }
   const auto r = std::to_chars(buf, buf + sizeof(buf), v, std::chars_format::fixed, precision);
-  line_.append(buf, r.ptr);
+  line_.append(buf, static_cast<std::size_t>(r.ptr - buf));
   return *this;
 }
 
@@ -128,14 +129,14 @@ TextLine& TextLine::general(double v, int precision) {
   char buf[kBuffer];
   const auto r =
       std::to_chars(buf, buf + sizeof(buf), v, std::chars_format::general, clamp(precision));
-  line_.append(buf, r.ptr);
+  line_.append(buf, static_cast<std::size_t>(r.ptr - buf));
   return *this;
 }
 
 TextLine& TextLine::integer(std::uint64_t v) {
   char buf[24];
   const auto r = std::to_chars(buf, buf + sizeof(buf), v);
-  line_.append(buf, r.ptr);
+  line_.append(buf, static_cast<std::size_t>(r.ptr - buf));
   return *this;
 }
 

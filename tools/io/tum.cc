@@ -12,7 +12,7 @@ namespace {
 void put(std::string& line, double v) {
   char buf[32];
   const auto r = std::to_chars(buf, buf + sizeof(buf), v);
-  line.append(buf, r.ptr);
+  line.append(buf, static_cast<std::size_t>(r.ptr - buf));
 }
 
 void check_finite(const StampedPose& p) {
