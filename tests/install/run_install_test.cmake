@@ -23,7 +23,8 @@ cmake_minimum_required(VERSION 3.25)
 set(package_build "${WORK_DIR}/package")
 set(prefix_a "${WORK_DIR}/a")
 set(prefix_b "${WORK_DIR}/b")
-file(REMOVE_RECURSE "${prefix_a}" "${prefix_b}" "${WORK_DIR}/headers" "${WORK_DIR}/consumer")
+file(REMOVE_RECURSE "${prefix_a}" "${prefix_b}" "${WORK_DIR}/headers" "${WORK_DIR}/consumer"
+  "${WORK_DIR}/sweep")
 set(parallel --parallel 2)
 if(DEFINED ENV{CMAKE_BUILD_PARALLEL_LEVEL})
   set(parallel)
@@ -90,7 +91,8 @@ foreach(file IN LISTS installed)
   elseif(NOT file MATCHES "^lib/libfastslam_(memory|parallel|engine)\\.a$"
          AND NOT file MATCHES "^lib/libfastslam\\.so(\\.[0-9.]+)?$"  # the C API
          AND NOT file STREQUAL "lib/pkgconfig/fastslam.pc"
-         AND NOT file STREQUAL "bin/fastslam")  # the command line
+         AND NOT file STREQUAL "bin/fastslam"  # the command line
+         AND NOT file STREQUAL "lib/fastslam/fastslam_mpi.so")  # its MPI module
     message(FATAL_ERROR "not part of the package: ${file}")  # tools' libraries, tests, ...
   endif()
   if(file MATCHES "\\.(h|cmake|pc|py)$")
@@ -212,6 +214,24 @@ file(GLOB python_dirs LIST_DIRECTORIES true "${prefix_b}/lib/python3*/dist-packa
 run(${CMAKE_COMMAND} -E env "PYTHONPATH=${python_dirs}" /usr/bin/python3
     "${CMAKE_CURRENT_LIST_DIR}/python_import.py" "${prefix_b}")
 message(STATUS "${run_output}")
+
+# The command line from the moved prefix; under mpirun it loads its MPI module from
+# lib/fastslam/ beside bin/ (tools/cli/mpi_transport.h), which a sweep's ranks then use.
+run("${prefix_b}/bin/fastslam" --version)
+find_program(mpirun mpirun)
+if(EXISTS "${prefix_b}/lib/fastslam/fastslam_mpi.so" AND mpirun)
+  set(as_root)
+  execute_process(COMMAND id -u OUTPUT_VARIABLE uid OUTPUT_STRIP_TRAILING_WHITESPACE)
+  if(uid STREQUAL "0")
+    set(as_root --allow-run-as-root)
+  endif()
+  run(${mpirun} --oversubscribe ${as_root} -n 2 "${prefix_b}/bin/fastslam" sweep
+      --out "${WORK_DIR}/sweep" --seeds 1-2 --max-steps 20)
+  if(NOT run_output MATCHES "2 ranks")
+    message(FATAL_ERROR "the moved prefix's fastslam did not sweep over 2 ranks:\n${run_output}")
+  endif()
+  message(STATUS "bin/fastslam under mpirun -n 2: its MPI module loaded from the moved prefix")
+endif()
 
 string(TIMESTAMP now "%s")
 math(EXPR seconds "${now} - ${start}")

@@ -2,12 +2,10 @@
 
 #include <algorithm>
 #include <cstdlib>
-
-#ifdef FASTSLAM_HAVE_MPI
-#include <mpi.h>
-
-#include "parallel/mpi_collective.h"
-#endif
+#include <cstring>
+#include <dlfcn.h>
+#include <filesystem>
+#include <stdexcept>
 
 namespace fastslam::tools {
 namespace {
@@ -17,6 +15,34 @@ int env_int(const char* name) {
   const char* v = std::getenv(name);
   return v == nullptr ? 0 : std::atoi(v);
 }
+
+#ifdef FASTSLAM_HAVE_MPI
+// The module beside the executable: <bin>/../lib/fastslam/fastslam_mpi.so, in the build tree
+// (build/<preset>/tools/fastslam) as installed (<prefix>/bin/fastslam).
+std::unique_ptr<MpiTransport> open_transport() {
+  std::error_code error;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", error);
+  const std::filesystem::path module =
+      (exe.parent_path() / FASTSLAM_MPI_MODULE_RELATIVE).lexically_normal();
+  // RTLD_GLOBAL: Open MPI's own components, loaded later, resolve libmpi's symbols from it.
+  void* handle = dlopen(module.c_str(), RTLD_NOW | RTLD_GLOBAL);
+  if (handle == nullptr) {
+    const char* why = dlerror();
+    throw std::runtime_error("cannot load the MPI module " + module.string() + ": " +
+                             (why != nullptr ? why : "unknown error") +
+                             " (the module is installed with fastslam; the Open MPI it needs "
+                             "comes with Debian's libopenmpi3). Without mpirun, fastslam needs "
+                             "no MPI");
+  }
+  // Never closed: MPI cannot be initialised twice in a process.
+  const auto open = reinterpret_cast<MpiTransportOpen>(dlsym(handle, kMpiTransportOpen));
+  if (open == nullptr) {
+    throw std::runtime_error("the MPI module " + module.string() + " has no " + kMpiTransportOpen +
+                             ": it is not this fastslam's");
+  }
+  return std::unique_ptr<MpiTransport>(open());
+}
+#endif
 
 }  // namespace
 
@@ -45,67 +71,64 @@ bool have_mpi() noexcept {
 Ranks::Ranks(bool use_mpi) {
 #ifdef FASTSLAM_HAVE_MPI
   if (use_mpi) {
-    int provided = 0;
-    MPI_Init_thread(nullptr, nullptr, MPI_THREAD_SERIALIZED, &provided);
-    mpi_ = true;
-    serialized_ = provided >= MPI_THREAD_SERIALIZED;
-    MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
-    MPI_Comm_size(MPI_COMM_WORLD, &size_);
+    mpi_ = open_transport();
+    serialized_ = mpi_->serialized();
+    rank_ = mpi_->rank();
+    size_ = mpi_->size();
   }
 #else
   (void)use_mpi;
 #endif
 }
 
-Ranks::~Ranks() {
-#ifdef FASTSLAM_HAVE_MPI
-  if (mpi_) MPI_Finalize();
-#endif
+Ranks::~Ranks() = default;
+
+const MpiTransport& Ranks::transport() const {
+  if (!mpi_) throw std::logic_error("Ranks: MPI is not in use");
+  return *mpi_;
 }
 
 std::vector<int> Ranks::all_flags(int flag) const {
   std::vector<int> flags(static_cast<std::size_t>(size_), flag);
-#ifdef FASTSLAM_HAVE_MPI
-  if (mpi_) MPI_Allgather(&flag, 1, MPI_INT, flags.data(), 1, MPI_INT, MPI_COMM_WORLD);
-#endif
+  if (mpi_) mpi_->all_gather(&flag, sizeof(flag), flags.data());
   return flags;
 }
 
 std::string Ranks::broadcast(std::string text) const {
-#ifdef FASTSLAM_HAVE_MPI
-  if (mpi_) {
-    long long n = static_cast<long long>(text.size());
-    MPI_Bcast(&n, 1, MPI_LONG_LONG, 0, MPI_COMM_WORLD);
-    text.resize(static_cast<std::size_t>(n));
-    MPI_Bcast(text.data(), static_cast<int>(n), MPI_CHAR, 0, MPI_COMM_WORLD);
-  }
-#endif
+  if (mpi_) mpi_->broadcast(text);
   return text;
 }
 
 std::vector<std::string> Ranks::gather(const std::string& text, std::size_t width) const {
-  std::vector<std::string> out;
   if (!mpi_) return {text};
-#ifndef FASTSLAM_HAVE_MPI
-  (void)width;
-#else
   std::string padded = text;
   padded.resize(width, ' ');
   std::string all(rank_ == 0 ? width * static_cast<std::size_t>(size_) : 0, ' ');
-  MPI_Gather(padded.data(), static_cast<int>(width), MPI_CHAR, all.data(), static_cast<int>(width),
-             MPI_CHAR, 0, MPI_COMM_WORLD);
+  mpi_->gather(padded.data(), width, all.data());
+  std::vector<std::string> out;
   for (std::size_t r = 0; rank_ == 0 && r < static_cast<std::size_t>(size_); ++r) {
     out.push_back(all.substr(r * width, width));
   }
-#endif
   return out;
 }
 
-std::shared_ptr<parallel::Collective> Ranks::collective() const {
-#ifdef FASTSLAM_HAVE_MPI
-  if (mpi_) return parallel::mpi_world();
-#endif
-  throw std::logic_error("Ranks::collective: MPI is not in use");
+std::shared_ptr<parallel::Collective> Ranks::collective() const { return transport().collective(); }
+
+void Ranks::send(int destination, int tag, std::string_view bytes) const {
+  transport().send(destination, tag, bytes);
+}
+
+std::optional<RankMessage> Ranks::poll() const { return transport().poll(); }
+
+std::optional<std::string> Ranks::poll(int source, int tag) const {
+  return transport().poll(source, tag);
+}
+
+std::string Ranks::receive(int source, int tag) const { return transport().receive(source, tag); }
+
+void Ranks::abort(int code) const {
+  transport().abort(code);
+  std::abort();  // not reached: the transport's abort ends the process
 }
 
 }  // namespace fastslam::tools

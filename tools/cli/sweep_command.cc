@@ -5,20 +5,18 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
-
-#ifdef FASTSLAM_HAVE_MPI
-#include <mpi.h>
-#endif
 
 #include "tools/cli/build_info.h"
 #include "tools/cli/interrupt.h"
@@ -301,11 +299,23 @@ void run_workers(unsigned jobs, const SweepPlan& plan, const std::string& out, u
   for (std::thread& t : workers) t.join();
 }
 
-#ifdef FASTSLAM_HAVE_MPI
 void pause_briefly(int& idle) {
   // From 0.1 ms up to 3.2 ms while nothing comes: answers stay prompt, an idle rank sleeps.
   std::this_thread::sleep_for(std::chrono::microseconds(100 << std::min(idle, 5)));
   idle = std::min(idle + 1, 6);
+}
+
+// A run index or an exit code as a message's bytes, and back.
+template <class T>
+std::string_view bytes_of(const T& v) {
+  return {reinterpret_cast<const char*>(&v), sizeof(T)};
+}
+template <class T>
+T value_of(const std::string& bytes) {
+  T v{};
+  if (bytes.size() != sizeof(T)) throw std::runtime_error("MPI: a message of the wrong size");
+  std::memcpy(&v, bytes.data(), sizeof(T));
+  return v;
 }
 
 // Rank 0 serves the other ranks' requests while its own workers run.
@@ -313,26 +323,19 @@ void serve(Ranks& ranks, Dispenser& d, const std::atomic<unsigned>& local_runnin
   int ranks_done = 0;
   int idle = 0;
   while (ranks_done < ranks.size() - 1 || local_running > 0) {
-    int flag = 0;
-    MPI_Status status;
-    MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, MPI_COMM_WORLD, &flag, &status);
-    if (!flag) {
+    std::optional<RankMessage> m = ranks.poll();
+    if (!m) {
       pause_briefly(idle);
       continue;
     }
     idle = 0;
-    int bytes = 0;
-    MPI_Get_count(&status, MPI_CHAR, &bytes);
-    std::string text(static_cast<std::size_t>(bytes), '\0');
-    MPI_Recv(text.data(), bytes, MPI_CHAR, status.MPI_SOURCE, status.MPI_TAG, MPI_COMM_WORLD,
-             MPI_STATUS_IGNORE);
-    if (status.MPI_TAG == kDone) {
+    if (m->tag == kDone) {
       ++ranks_done;
       continue;
     }
-    if (!text.empty()) d.record(nlohmann::json::parse(text), status.MPI_SOURCE);
-    long long next = d.next();
-    MPI_Send(&next, 1, MPI_LONG_LONG, status.MPI_SOURCE, kAssign, MPI_COMM_WORLD);
+    if (!m->bytes.empty()) d.record(nlohmann::json::parse(m->bytes), m->source);
+    const long long next = d.next();
+    ranks.send(m->source, kAssign, bytes_of(next));
   }
 }
 
@@ -342,24 +345,17 @@ int work(Ranks& ranks, const Setup& s, const std::string& out, unsigned jobs, un
   const auto next = [&ranks](const nlohmann::json* result) -> long long {
     const std::string text = result != nullptr ? dump(*result) : std::string();
     const std::lock_guard lock(ranks.exchange_mutex);
-    MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, 0, kRequest, MPI_COMM_WORLD);
-    long long i = -1;
-    MPI_Recv(&i, 1, MPI_LONG_LONG, 0, kAssign, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-    return i;
+    ranks.send(0, kRequest, text);
+    return value_of<long long>(ranks.receive(0, kAssign));
   };
   run_workers(ranks.serialized() ? jobs : 1, s.plan, out, threads, next);
-  MPI_Send(nullptr, 0, MPI_CHAR, 0, kDone, MPI_COMM_WORLD);
-  int code = 1;
-  MPI_Request request;
-  MPI_Irecv(&code, 1, MPI_INT, 0, kFinal, MPI_COMM_WORLD, &request);
+  ranks.send(0, kDone, {});
   int idle = 0;
-  for (int flag = 0; !flag;) {
-    MPI_Test(&request, &flag, MPI_STATUS_IGNORE);
-    if (!flag) pause_briefly(idle);
+  for (;;) {
+    if (std::optional<std::string> code = ranks.poll(0, kFinal)) return value_of<int>(*code);
+    pause_briefly(idle);
   }
-  return code;
 }
-#endif
 
 // Every rank: refuses the sweep on all ranks when any could not plan it or planned another.
 // Returns false (after the messages) when refused.
@@ -404,8 +400,7 @@ bool agree(const Ranks& ranks, const std::string& error, const std::string& dige
 
 int run_sweep_command(const SweepOptions& options) {
   const Launch launch = launch_environment();
-#ifndef FASTSLAM_HAVE_MPI
-  if (launch.size > 1) {
+  if (launch.size > 1 && !have_mpi()) {
     std::fprintf(stderr,
                  "fastslam: error: this fastslam was built without MPI but was started as one "
                  "of %d processes (mpirun): each would run the whole sweep. Rebuild with Open "
@@ -413,8 +408,7 @@ int run_sweep_command(const SweepOptions& options) {
                  launch.size);
     return 1;
   }
-#endif
-  Ranks ranks(launch.launched);
+  Ranks ranks(launch.launched && have_mpi());
   const bool rank0 = ranks.rank() == 0;
   const InterruptHandlers handlers;
   Setup s;
@@ -458,7 +452,6 @@ int run_sweep_command(const SweepOptions& options) {
         if (ranks.size() == 1) {
           run_workers(jobs, s.plan, options.request.out, threads, next);
         } else {
-#ifdef FASTSLAM_HAVE_MPI
           // The main thread serves the other ranks; the local workers run beside it.
           std::atomic<unsigned> running{1};
           std::thread local([&] {
@@ -470,10 +463,9 @@ int run_sweep_command(const SweepOptions& options) {
           } catch (const std::exception& e) {
             // The other ranks wait on rank 0's answers: end them all rather than leave them.
             std::fprintf(stderr, "fastslam: error: rank 0: %s; aborting every rank\n", e.what());
-            MPI_Abort(MPI_COMM_WORLD, 1);
+            ranks.abort(1);
           }
           local.join();
-#endif
         }
         code = write_results(options, s.plan, d, s.done.size(), ranks.size(), jobs);
       }
@@ -481,20 +473,11 @@ int run_sweep_command(const SweepOptions& options) {
       std::fprintf(stderr, "fastslam: error: %s\n", e.what());
       code = 1;
     }
-#ifdef FASTSLAM_HAVE_MPI
-    for (int r = 1; r < ranks.size(); ++r) MPI_Send(&code, 1, MPI_INT, r, kFinal, MPI_COMM_WORLD);
-#endif
+    for (int r = 1; r < ranks.size(); ++r) ranks.send(r, kFinal, bytes_of(code));
     return code;
   }
-#ifdef FASTSLAM_HAVE_MPI
-  if (options.dry_run) {
-    MPI_Recv(&code, 1, MPI_INT, 0, kFinal, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-    return code;
-  }
+  if (options.dry_run) return value_of<int>(ranks.receive(0, kFinal));
   return work(ranks, s, options.request.out, jobs, threads);
-#else
-  return code;
-#endif
 }
 
 }  // namespace fastslam::tools
