@@ -12,14 +12,6 @@
 namespace fastslam::parallel {
 namespace {
 
-int checked_count(std::size_t bytes) {
-  if (bytes > static_cast<std::size_t>(INT_MAX)) {
-    throw std::length_error("MPI collective: " + std::to_string(bytes) +
-                            " bytes exceed MPI's int count limit");
-  }
-  return static_cast<int>(bytes);
-}
-
 void check(int code, const char* what) {
   if (code != MPI_SUCCESS) {
     char text[MPI_MAX_ERROR_STRING];
@@ -35,10 +27,10 @@ std::size_t displacements(const std::vector<int>& counts, std::vector<int>& at) 
   at.resize(counts.size());
   std::size_t total = 0;
   for (std::size_t r = 0; r < counts.size(); ++r) {
-    at[r] = checked_count(total);
+    at[r] = mpi_count(total);
     total += static_cast<std::size_t>(counts[r]);
   }
-  checked_count(total);
+  mpi_count(total);
   return total;
 }
 
@@ -63,7 +55,7 @@ class MpiCollective final : public Collective {
   int size() const noexcept override { return size_; }
 
   Bytes all_gather(std::span<const std::byte> mine, std::vector<std::size_t>* sizes) override {
-    const int count = checked_count(mine.size());
+    const int count = mpi_count(mine.size());
     std::vector<int> counts(static_cast<std::size_t>(size_));
     check(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_), "MPI_Allgather");
     std::vector<int> at;
@@ -83,7 +75,7 @@ class MpiCollective final : public Collective {
     }
     std::vector<int> send_counts(n), recv_counts(n);
     for (std::size_t d = 0; d < n; ++d) {
-      send_counts[d] = d == static_cast<std::size_t>(rank_) ? 0 : checked_count(to[d].size());
+      send_counts[d] = d == static_cast<std::size_t>(rank_) ? 0 : mpi_count(to[d].size());
     }
     check(MPI_Alltoall(send_counts.data(), 1, MPI_INT, recv_counts.data(), 1, MPI_INT, comm_),
           "MPI_Alltoall");
@@ -116,6 +108,14 @@ class MpiCollective final : public Collective {
 };
 
 }  // namespace
+
+int mpi_count(std::size_t bytes) {
+  if (bytes > static_cast<std::size_t>(INT_MAX)) {
+    throw std::length_error("MPI: " + std::to_string(bytes) +
+                            " bytes exceed MPI's int count limit");
+  }
+  return static_cast<int>(bytes);
+}
 
 std::shared_ptr<Collective> mpi_world() {
   int initialized = 0;

@@ -9,6 +9,7 @@
 // (std::length_error beyond).
 #pragma once
 
+#include <cstddef>
 #include <memory>
 
 #include "parallel/collective.h"
@@ -17,5 +18,8 @@ namespace fastslam::parallel {
 
 // REQUIRES: MPI initialised. Throws std::runtime_error when MPI is not initialised.
 std::shared_ptr<Collective> mpi_world();
+
+// `bytes` as an MPI count; throws std::length_error beyond MPI's int limit.
+int mpi_count(std::size_t bytes);
 
 }  // namespace fastslam::parallel

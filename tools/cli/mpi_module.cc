@@ -1,6 +1,5 @@
 // The module fastslam_mpi: MpiTransport (tools/cli/mpi_transport.h) over MPI_COMM_WORLD, loaded
 // by Ranks (tools/cli/mpi_ranks.cc) when a launcher started the process.
-#include <climits>
 #include <cstdlib>
 #include <mpi.h>
 #include <optional>
@@ -13,14 +12,6 @@
 
 namespace fastslam::tools {
 namespace {
-
-int count(std::size_t bytes) {
-  if (bytes > static_cast<std::size_t>(INT_MAX)) {
-    throw std::length_error("MPI: " + std::to_string(bytes) +
-                            " bytes exceed MPI's int count limit");
-  }
-  return static_cast<int>(bytes);
-}
 
 class WorldTransport final : public MpiTransport {
  public:
@@ -40,23 +31,26 @@ class WorldTransport final : public MpiTransport {
   bool serialized() const override { return serialized_; }
 
   void all_gather(const void* mine, std::size_t bytes, void* all) const override {
-    MPI_Allgather(mine, count(bytes), MPI_BYTE, all, count(bytes), MPI_BYTE, MPI_COMM_WORLD);
+    const int n = parallel::mpi_count(bytes);
+    MPI_Allgather(mine, n, MPI_BYTE, all, n, MPI_BYTE, MPI_COMM_WORLD);
   }
   void broadcast(std::string& text) const override {
     long long n = static_cast<long long>(text.size());
     MPI_Bcast(&n, 1, MPI_LONG_LONG, 0, MPI_COMM_WORLD);
     text.resize(static_cast<std::size_t>(n));
-    MPI_Bcast(text.data(), count(text.size()), MPI_BYTE, 0, MPI_COMM_WORLD);
+    MPI_Bcast(text.data(), parallel::mpi_count(text.size()), MPI_BYTE, 0, MPI_COMM_WORLD);
   }
   void gather(const void* mine, std::size_t bytes, void* all) const override {
-    MPI_Gather(mine, count(bytes), MPI_BYTE, all, count(bytes), MPI_BYTE, 0, MPI_COMM_WORLD);
+    const int n = parallel::mpi_count(bytes);
+    MPI_Gather(mine, n, MPI_BYTE, all, n, MPI_BYTE, 0, MPI_COMM_WORLD);
   }
   std::shared_ptr<parallel::Collective> collective() const override {
     return parallel::mpi_world();
   }
 
   void send(int destination, int tag, std::string_view bytes) const override {
-    MPI_Send(bytes.data(), count(bytes.size()), MPI_BYTE, destination, tag, MPI_COMM_WORLD);
+    MPI_Send(bytes.data(), parallel::mpi_count(bytes.size()), MPI_BYTE, destination, tag,
+             MPI_COMM_WORLD);
   }
   std::optional<RankMessage> poll() const override { return arrived(MPI_ANY_SOURCE, MPI_ANY_TAG); }
   std::optional<std::string> poll(int source, int tag) const override {

@@ -70,12 +70,7 @@ bool have_mpi() noexcept {
 
 Ranks::Ranks(bool use_mpi) {
 #ifdef FASTSLAM_HAVE_MPI
-  if (use_mpi) {
-    mpi_ = open_transport();
-    serialized_ = mpi_->serialized();
-    rank_ = mpi_->rank();
-    size_ = mpi_->size();
-  }
+  if (use_mpi) mpi_ = open_transport();
 #else
   (void)use_mpi;
 #endif
@@ -89,7 +84,7 @@ const MpiTransport& Ranks::transport() const {
 }
 
 std::vector<int> Ranks::all_flags(int flag) const {
-  std::vector<int> flags(static_cast<std::size_t>(size_), flag);
+  std::vector<int> flags(static_cast<std::size_t>(size()), flag);
   if (mpi_) mpi_->all_gather(&flag, sizeof(flag), flags.data());
   return flags;
 }
@@ -103,10 +98,10 @@ std::vector<std::string> Ranks::gather(const std::string& text, std::size_t widt
   if (!mpi_) return {text};
   std::string padded = text;
   padded.resize(width, ' ');
-  std::string all(rank_ == 0 ? width * static_cast<std::size_t>(size_) : 0, ' ');
+  std::string all(rank() == 0 ? width * static_cast<std::size_t>(size()) : 0, ' ');
   mpi_->gather(padded.data(), width, all.data());
   std::vector<std::string> out;
-  for (std::size_t r = 0; rank_ == 0 && r < static_cast<std::size_t>(size_); ++r) {
+  for (std::size_t r = 0; rank() == 0 && r < static_cast<std::size_t>(size()); ++r) {
     out.push_back(all.substr(r * width, width));
   }
   return out;

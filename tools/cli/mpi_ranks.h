@@ -42,11 +42,11 @@ class Ranks {
   Ranks(const Ranks&) = delete;
   Ranks& operator=(const Ranks&) = delete;
 
-  int rank() const { return rank_; }
-  int size() const { return size_; }
+  int rank() const { return mpi_ ? mpi_->rank() : 0; }
+  int size() const { return mpi_ ? mpi_->size() : 1; }
   bool mpi() const { return mpi_ != nullptr; }
   // Several threads of a rank may exchange with rank 0 (one at a time).
-  bool serialized() const { return serialized_; }
+  bool serialized() const { return mpi_ ? mpi_->serialized() : true; }
 
   // Every rank's flag, on every rank.
   std::vector<int> all_flags(int flag) const;
@@ -71,9 +71,6 @@ class Ranks {
   const MpiTransport& transport() const;
 
   std::unique_ptr<MpiTransport> mpi_;
-  bool serialized_ = true;
-  int rank_ = 0;
-  int size_ = 1;
 };
 
 }  // namespace fastslam::tools
