@@ -377,6 +377,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     }
   };
   InputDigest input;
+  bool steps_out = false;  // --max-steps reached: the run ends at this event
   bool input_over = false;  // over ranks: this rank's run ends here; the ranks agree below
   // An event's filter time runs from after its source call to the next event's first clock
   // read: two reads an event (each ~30 ns; a run has a few per control).
@@ -466,6 +467,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
         case EventKind::kControl:
           if (loop.options.max_steps && controls == *loop.options.max_steps) {
             r.ended_by = "--max-steps";
+            steps_out = true;
             break;
           }
           located([&] { filter.predict(event.control, event.dt, event.time); });
@@ -540,7 +542,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
     }
     r.source_seconds += std::chrono::duration<double>(t1 - t0).count();
     filter_from = t1;
-    if (r.ended_by != "end of data") {
+    if (steps_out) {
       if (loop.group == nullptr) break;
       input_over = true;  // --max-steps: agreed at the next gather, as the input's end
     }
