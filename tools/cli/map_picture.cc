@@ -450,18 +450,25 @@ std::string tick_label(double v, int decimals) {
 // Hundredths of a pixel, clamped far outside any picture.
 long long centi(double px) { return std::llround(std::clamp(px, -1e7, 1e7) * 100); }
 
-// `c` hundredths of a pixel, no trailing zeros: 12.5, 3, -0.07.
+// `c` hundredths of a pixel, no trailing zeros: 12.5, 3, -0.07. Built backwards in a buffer
+// and appended once: a path has a few numbers per vertex and up to kMaxPathPoints vertices.
 void put_centi(TextLine& t, long long c) {
-  if (c < 0) {
-    t.put('-');
-    c = -c;
-  }
-  t.integer(static_cast<std::uint64_t>(c / 100));
-  const int f = static_cast<int>(c % 100);
+  char buf[24];
+  char* p = buf + sizeof(buf);
+  std::uint64_t u = c < 0 ? 0 - static_cast<std::uint64_t>(c) : static_cast<std::uint64_t>(c);
+  const unsigned f = static_cast<unsigned>(u % 100);
+  u /= 100;
   if (f != 0) {
-    t.put('.').put(static_cast<char>('0' + f / 10));
-    if (f % 10 != 0) t.put(static_cast<char>('0' + f % 10));
+    if (f % 10 != 0) *--p = static_cast<char>('0' + f % 10);
+    *--p = static_cast<char>('0' + f / 10);
+    *--p = '.';
   }
+  do {
+    *--p = static_cast<char>('0' + u % 10);
+    u /= 10;
+  } while (u != 0);
+  if (c < 0) *--p = '-';
+  t.text(std::string_view(p, static_cast<std::size_t>(buf + sizeof(buf) - p)));
 }
 
 void put_px(TextLine& t, double px) { put_centi(t, centi(px)); }

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "engine/angles.h"
+#include "tools/io/decimal.h"
 
 namespace fastslam::tools {
 namespace {
@@ -82,7 +83,7 @@ class TableReader {
 
  private:
   void parse(std::string_view field, std::size_t column, double& value) const {
-    const auto [end, ec] = std::from_chars(field.data(), field.data() + field.size(), value);
+    const auto [end, ec] = parse_double(field.data(), field.data() + field.size(), value);
     if (ec != std::errc() || end != field.data() + field.size()) {
       fail(std::string("column '") + columns_[column] + "': '" + std::string(field) +
            "' is not a number");

@@ -1,5 +1,6 @@
 #include "tools/io/csv.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstddef>
@@ -11,10 +12,13 @@
 #include <string_view>
 #include <utility>
 
+#include "tools/io/decimal.h"
 #include "tools/io/log_format.h"
 
 namespace fastslam::tools {
 namespace {
+
+bool is_blank(char c) { return c == ' ' || c == '\t'; }
 
 std::string_view trim(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
@@ -63,28 +67,79 @@ CsvReader::CsvReader(std::string path, std::vector<std::string> columns)
 }
 
 bool CsvReader::next(std::span<double> out) {
-  while (read_line()) {
-    if (trim(text_).empty()) continue;
-    split();
-    if (fields_.size() != columns_.size()) {
-      fail("expected " + std::to_string(columns_.size()) + " columns, found " +
-           std::to_string(fields_.size()));
+  std::string_view line;
+  while (next_line(line)) {
+    if (line.empty() || is_blank(line.front()) || line.front() == '\r') {
+      if (trim(line).empty()) continue;
     }
-    for (std::size_t i = 0; i < fields_.size(); ++i) {
-      const std::string_view f = fields_[i];
-      double value = 0.0;
-      const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
-      if (f.empty() || ec != std::errc() || end != f.data() + f.size()) {
-        fail("column '" + columns_[i] + "': " + quoted(f) + " is not a number");
-      }
-      if (!std::isfinite(value)) {
-        fail("column '" + columns_[i] + "': value " + quoted(f) + " is not finite");
-      }
-      out[i] = value;
-    }
+    parse_row(line, out);
     return true;
   }
   return false;
+}
+
+bool CsvReader::next_line(std::string_view& line) {
+  // The common case: the whole line lies in the block, and is read where it is.
+  if (next_ != end_) {
+    const char* const start = block_.get() + next_;
+    const std::size_t n = end_ - next_;
+    const void* const newline = std::memchr(start, '\n', std::min(n, kMaxLogLineBytes + 1));
+    if (newline != nullptr) {
+      const std::size_t length =
+          static_cast<std::size_t>(static_cast<const char*>(newline) - start);
+      ++line_;
+      next_ += length + 1;
+      line = std::string_view(start, length);
+      return true;
+    }
+  }
+  if (!read_line()) return false;
+  line = text_;
+  return true;
+}
+
+// One pass: each field is parsed where it stands, up to its comma. A wrong column count is
+// reported before any field's own fault, so the first bad field is kept until the count is in.
+void CsvReader::parse_row(std::string_view line, std::span<double> out) const {
+  const char* p = line.data();
+  const char* const end = p + line.size();
+  const std::size_t columns = columns_.size();
+  std::size_t count = 0, bad = columns;
+  std::string_view bad_field;
+  bool bad_finite = false;
+  for (;;) {
+    while (p != end && is_blank(*p)) ++p;
+    const char* const begin = p;
+    double value = 0.0;
+    const auto [stop, ec] = parse_double(begin, end, value);
+    const char* q = stop;
+    while (q != end && (is_blank(*q) || *q == '\r')) ++q;
+    if (ec != std::errc() || stop == begin || (q != end && *q != ',')) {
+      // Not a number up to a comma: the field is what lies between the commas, trimmed.
+      q = begin;
+      while (q != end && *q != ',') ++q;
+      if (count < columns && bad == columns) {
+        bad = count, bad_field = trim(std::string_view(begin, static_cast<std::size_t>(q - begin)));
+      }
+    } else if (count < columns && bad == columns) {
+      if (std::isfinite(value)) {
+        out[count] = value;
+      } else {
+        bad = count, bad_field = std::string_view(begin, static_cast<std::size_t>(stop - begin));
+        bad_finite = true;
+      }
+    }
+    ++count;
+    if (q == end) break;
+    p = q + 1;
+  }
+  if (count != columns) {
+    fail("expected " + std::to_string(columns) + " columns, found " + std::to_string(count));
+  }
+  if (bad != columns) {
+    fail("column '" + columns_[bad] + "': " + (bad_finite ? "value " : "") + quoted(bad_field) +
+         (bad_finite ? " is not finite" : " is not a number"));
+  }
 }
 
 bool CsvReader::read_line() {

@@ -4,7 +4,9 @@
 //
 // Ownership: owns its file stream. Thread safety: thread-compatible.
 // Costs: O(bytes read), read in blocks of 4 KiB growing to 64 KiB (a small file costs a small
-// buffer) and split into lines with memchr; no allocation per row. A line is held to
+// buffer), lines found with memchr and parsed where they lie in the block (a line across two
+// blocks is copied once), each field parsed as it is cut (tools/io/decimal.h); no allocation
+// per row. A line is held to
 // kMaxLogLineBytes (tools/io/log_format.h): a longer one (a file with no newline) is refused, not
 // read whole.
 #pragma once
@@ -33,9 +35,15 @@ class CsvReader {
   [[noreturn]] void fail(const std::string& what) const;
 
  private:
+  // The next line without its '\n': in place in the block when it lies there whole, else
+  // gathered into text_ by read_line. The view lasts until the next call.
+  bool next_line(std::string_view& line);
   // One line into text_, without its '\n'; false at the end with nothing read. Throws (fail)
   // for a line longer than kMaxLogLineBytes and for a read the system refuses.
   bool read_line();
+  // The row's fields into `out`; throws (fail) for a wrong count or a field that is not a
+  // finite number.
+  void parse_row(std::string_view line, std::span<double> out) const;
   // Reads the next block; false at the end of the file.
   bool fill();
   // text_'s comma-separated fields, trimmed, into fields_.

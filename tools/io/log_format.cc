@@ -22,6 +22,7 @@
 #include "engine/motion_dispatch.h"
 #include "tools/io/atomic_file.h"
 #include "tools/io/bounded_line.h"
+#include "tools/io/decimal.h"
 
 namespace fastslam::tools {
 
@@ -310,7 +311,7 @@ class LogReader::Parser {
   double number(std::size_t i, const char* what) {
     const std::string_view f = tokens_[i];
     double value = 0.0;
-    const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
+    const auto [end, ec] = parse_double(f.data(), f.data() + f.size(), value);
     if (ec == std::errc::result_out_of_range && end == f.data() + f.size()) {
       fail(std::string(what) + ": " + quoted(f) + " is out of a double's range");
     }

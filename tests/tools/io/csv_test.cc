@@ -1,10 +1,14 @@
 #include "tools/io/csv.h"
 
 #include <array>
+#include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -104,6 +108,54 @@ TEST_F(CsvTest, RefusesADirectory) {
   }
 }
 
+// Fields in every form a writer might use, padded with blanks and a \r\n ending now and then:
+// each reads as std::from_chars reads the field trimmed.
+TEST_F(CsvTest, ReadsEveryNumberFormAsFromChars) {
+  std::mt19937_64 random(5);
+  std::uniform_real_distribution<double> mantissa(-1.0, 1.0);
+  std::uniform_int_distribution<int> exponent(-12, 12), form(0, 3), pad(0, 2);
+  const char* const pads[] = {"", " ", "\t "};
+  std::string text = "id,x_m,y_m\n";
+  std::vector<std::array<std::string, 3>> rows;
+  for (int i = 0; i < 5000; ++i) {
+    std::array<std::string, 3> fields;
+    for (std::string& f : fields) {
+      const double v = mantissa(random) * std::pow(10.0, exponent(random));
+      char buf[64];
+      switch (form(random)) {
+        case 0:
+          std::snprintf(buf, sizeof(buf), "%.6f", v);
+          break;
+        case 1:
+          std::snprintf(buf, sizeof(buf), "%.17g", v);
+          break;
+        case 2:
+          std::snprintf(buf, sizeof(buf), "%.3e", v);
+          break;
+        default:
+          *std::to_chars(buf, buf + sizeof(buf), v).ptr = 0;
+          break;
+      }
+      f = buf;
+      text += pads[pad(random)] + f + pads[pad(random)] + (&f == &fields[2] ? "" : ",");
+    }
+    text += i % 7 == 0 ? "\r\n" : "\n";
+    rows.push_back(fields);
+  }
+  const std::string path = write(text);
+  CsvReader reader(path, {"id", "x_m", "y_m"});
+  std::array<double, 3> row{};
+  for (const std::array<std::string, 3>& fields : rows) {
+    ASSERT_TRUE(reader.next(row));
+    for (int k = 0; k < 3; ++k) {
+      double expected = 0;
+      std::from_chars(fields[k].data(), fields[k].data() + fields[k].size(), expected);
+      ASSERT_EQ(row[k], expected) << fields[k];
+    }
+  }
+  EXPECT_FALSE(reader.next(row));
+}
+
 TEST_F(CsvTest, RefusesMalformedInputNamingFileLineAndReason) {
   {
     const std::string e = error_of("id,x_m\n");
@@ -124,6 +176,27 @@ TEST_F(CsvTest, RefusesMalformedInputNamingFileLineAndReason) {
   {
     const std::string e = error_of("id,x_m,y_m\n1,nan,3\n");
     EXPECT_NE(e.find(":2: column 'x_m': value 'nan' is not finite"), std::string::npos) << e;
+  }
+  {
+    // A wrong count is reported before a field's own fault, on either side of it.
+    EXPECT_NE(error_of("id,x_m,y_m\n1,abc\n").find(":2: expected 3 columns, found 2"),
+              std::string::npos);
+    EXPECT_NE(error_of("id,x_m,y_m\n1,abc,3,4\n").find(":2: expected 3 columns, found 4"),
+              std::string::npos);
+    EXPECT_NE(error_of("id,x_m,y_m\n1,2,3,\n").find(":2: expected 3 columns, found 4"),
+              std::string::npos);
+  }
+  {
+    // The first bad field is named, trimmed, when two are bad.
+    const std::string e = error_of("id,x_m,y_m\n1, 2 5 ,x\n");
+    EXPECT_NE(e.find(":2: column 'x_m': '2 5' is not a number"), std::string::npos) << e;
+    EXPECT_NE(error_of("id,x_m,y_m\n-,1,2\n").find(":2: column 'id': '-' is not a number"),
+              std::string::npos);
+    EXPECT_NE(error_of("id,x_m,y_m\n1,2,1e999\n").find(":2: column 'y_m': '1e999' is not a number"),
+              std::string::npos);
+    EXPECT_NE(
+        error_of("id,x_m,y_m\n1,-inf ,2\n").find(":2: column 'x_m': value '-inf' is not finite"),
+        std::string::npos);
   }
   {
     const std::string e = error_of("id,x_m,y_m\n1,,3\n");
