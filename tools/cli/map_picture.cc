@@ -62,51 +62,6 @@ struct Box {
   bool contains(double x, double y) const { return x0 <= x && x <= x1 && y0 <= y && y <= y1; }
 };
 
-// Every stride-th row kept, the stride doubling (and every other kept row dropped) whenever
-// `limit` would be passed: at most `limit` rows of any number, evenly spread, in one pass.
-template <class T>
-class Thinned {
- public:
-  explicit Thinned(std::size_t limit) : limit_(limit) {}
-
-  // Offers row `row`'s value; rows come in increasing order.
-  void add(std::uint64_t row, const T& value) {
-    last_ = {row, value};
-    ++offered_;
-    if ((row & (stride_ - 1)) != 0) return;  // the stride is a power of two
-    if (kept_.size() >= limit_) {
-      stride_ *= 2;
-      std::erase_if(kept_, [m = stride_ - 1](const Kept& k) { return (k.row & m) != 0; });
-      if ((row & (stride_ - 1)) != 0) return;
-    }
-    kept_.push_back({row, value});
-  }
-
-  // The kept values; `with_last`: and the last one offered (a path's end), if it was dropped.
-  std::vector<T> values(bool with_last = false) const {
-    std::vector<T> out;
-    out.reserve(kept_.size() + 1);
-    for (const Kept& k : kept_) out.push_back(k.value);
-    if (with_last && offered_ > 0 && (kept_.empty() || kept_.back().row != last_.row)) {
-      out.push_back(last_.value);
-    }
-    return out;
-  }
-  std::uint64_t stride() const { return stride_; }
-  std::uint64_t offered() const { return offered_; }
-
- private:
-  struct Kept {
-    std::uint64_t row = 0;
-    T value{};
-  };
-  std::size_t limit_;
-  std::uint64_t stride_ = 1;
-  std::uint64_t offered_ = 0;
-  std::vector<Kept> kept_;
-  Kept last_;
-};
-
 // The rows of a path inside `near`, at full resolution up to kMaxPathPoints, a new segment each
 // time the path comes back (plot_run.py's read_near).
 class NearPath {
@@ -209,7 +164,29 @@ std::optional<Alignment> read_alignment(const nlohmann::json& metrics, const std
   return std::nullopt;
 }
 
-Run read_run(const std::string& dir) {
+// A position file's rows as the picture takes them: from `given` when the run handed them
+// over, else read from `path` (nothing when it is absent).
+PicturePath take_path(const std::string& path, const std::vector<std::string>& columns,
+                      const PicturePath* given, std::size_t limit) {
+  if (given != nullptr) return *given;
+  PicturePath taken(limit);
+  read_rows(path, columns,
+            [&](std::uint64_t, std::span<const double> v) { taken.add(v[1], v[2]); });
+  return taken;
+}
+
+std::vector<Vertex> vertices(const PicturePath& path) {
+  std::vector<Vertex> out;
+  for (const PicturePath::Point& p : path.rows().values(true)) out.push_back({p.x, p.y, 0});
+  return out;
+}
+
+void add_box(Box& extent, const PicturePath& path) {
+  const std::array<double, 4> b = path.box();
+  extent.add(Box{b[0], b[1], b[2], b[3]});
+}
+
+Run read_run(const std::string& dir, const PicturePaths* paths) {
   Run run;
   const std::string metrics_path = dir + "/metrics.json";
   run.metrics = read_metrics(metrics_path);
@@ -231,41 +208,24 @@ Run read_run(const std::string& dir) {
   run.true_stride = true_dots.stride();
   run.extent.add(true_box);
 
-  // The true path, and its pose nearest the landmarks' centroid, the zoom window's centre.
-  const Point centroid = {sum_x / std::max<double>(1, true_count),
-                          sum_y / std::max<double>(1, true_count)};
-  Thinned<Vertex> truth(kMaxPathPoints);
-  Point nearest;
-  double nearest_d2 = kInf;
-  read_rows(dir + "/truth.csv", kPoseColumns, [&](std::uint64_t row, std::span<const double> v) {
-    truth.add(row, {v[1], v[2], 0});
-    run.extent.add(v[1], v[2]);
-    const double d2 =
-        (v[1] - centroid.x) * (v[1] - centroid.x) + (v[2] - centroid.y) * (v[2] - centroid.y);
-    if (d2 < nearest_d2) nearest_d2 = d2, nearest = {v[1], v[2]};
-  });
-  run.truth = truth.values(true);
-
-  // A square holding about kZoomWindowLandmarks true landmarks at their mean density; paths
-  // are read within half its side around it, so that lines leave it at its edges.
-  std::optional<Box> window;
-  Box near;
-  if (true_count > 0 && truth.offered() > 0) {
-    const double area = std::max(1e-9, (true_box.x1 - true_box.x0) * (true_box.y1 - true_box.y0));
-    const double half = 0.5 * std::sqrt(kZoomWindowLandmarks * area / true_count);
-    window = Box{nearest.x - half, nearest.x + half, nearest.y - half, nearest.y + half};
-    near = Box{window->x0 - half, window->x1 + half, window->y0 - half, window->y1 + half};
+  // The paths and the fixes.
+  const PicturePath truth =
+      take_path(dir + "/truth.csv", kPoseColumns, paths ? &paths->truth : nullptr, kMaxPathPoints);
+  const PicturePath estimate = take_path(dir + "/trajectory.csv", kPoseColumns,
+                                         paths ? &paths->estimate : nullptr, kMaxPathPoints);
+  const PicturePath dead_reckoning =
+      take_path(dir + "/dead_reckoning.csv", kPoseColumns, paths ? &paths->dead_reckoning : nullptr,
+                kMaxPathPoints);
+  const PicturePath gps =
+      take_path(dir + "/gps.csv", kFixColumns, paths ? &paths->gps : nullptr, kMaxDots);
+  run.truth = vertices(truth);
+  run.estimate = vertices(estimate);
+  run.dead_reckoning = vertices(dead_reckoning);
+  for (const PicturePath::Point& p : gps.rows().values()) run.gps.push_back({p.x, p.y});
+  run.gps_stride = gps.rows().stride();
+  for (const PicturePath* path : {&truth, &estimate, &dead_reckoning, &gps}) {
+    add_box(run.extent, *path);
   }
-
-  Thinned<Vertex> estimate(kMaxPathPoints);
-  NearPath estimate_near(near);
-  read_rows(dir + "/trajectory.csv", kPoseColumns,
-            [&](std::uint64_t row, std::span<const double> v) {
-              estimate.add(row, {v[1], v[2], 0});
-              run.extent.add(v[1], v[2]);
-              if (window) estimate_near.offer(row, v[1], v[2]);
-            });
-  run.estimate = estimate.values(true);
   if (alignment) {
     for (const Vertex& v : run.estimate) {
       run.aligned.push_back((*alignment)(v));
@@ -273,21 +233,26 @@ Run read_run(const std::string& dir) {
     }
   }
 
-  Thinned<Vertex> dead_reckoning(kMaxPathPoints);
-  read_rows(dir + "/dead_reckoning.csv", kPoseColumns,
-            [&](std::uint64_t row, std::span<const double> v) {
-              dead_reckoning.add(row, {v[1], v[2], 0});
-              run.extent.add(v[1], v[2]);
-            });
-  run.dead_reckoning = dead_reckoning.values(true);
-
-  Thinned<Point> gps(kMaxDots);
-  read_rows(dir + "/gps.csv", kFixColumns, [&](std::uint64_t row, std::span<const double> v) {
-    gps.add(row, {v[1], v[2]});
-    run.extent.add(v[1], v[2]);
-  });
-  run.gps = gps.values();
-  run.gps_stride = gps.stride();
+  // A square holding about kZoomWindowLandmarks true landmarks at their mean density, centred
+  // on the true path's drawn vertex nearest the landmarks' centroid; paths are read within half
+  // its side around it, so that lines leave it at its edges.
+  std::optional<Box> window;
+  Box near;
+  if (true_count > 0 && !run.truth.empty()) {
+    const Point centroid = {sum_x / static_cast<double>(true_count),
+                            sum_y / static_cast<double>(true_count)};
+    Point nearest;
+    double nearest_d2 = kInf;
+    for (const Vertex& v : run.truth) {
+      const double d2 =
+          (v.x - centroid.x) * (v.x - centroid.x) + (v.y - centroid.y) * (v.y - centroid.y);
+      if (d2 < nearest_d2) nearest_d2 = d2, nearest = {v.x, v.y};
+    }
+    const double area = std::max(1e-9, (true_box.x1 - true_box.x0) * (true_box.y1 - true_box.y0));
+    const double half = 0.5 * std::sqrt(kZoomWindowLandmarks * area / true_count);
+    window = Box{nearest.x - half, nearest.x + half, nearest.y - half, nearest.y + half};
+    near = Box{window->x0 - half, window->x1 + half, window->y0 - half, window->y1 + half};
+  }
 
   // The estimated map: dots, the first rows for the ellipses of a small map, and those in the
   // zoom window.
@@ -316,13 +281,16 @@ Run read_run(const std::string& dir) {
   if (run.small || !window) return run;
   Zoom& zoom = run.zoom.emplace();
   zoom.window = *window;
-  zoom.estimate = estimate_near.values();
   zoom.landmarks = in_window.values();
-  NearPath truth_near(near);
-  read_rows(dir + "/truth.csv", kPoseColumns, [&](std::uint64_t row, std::span<const double> v) {
-    truth_near.offer(row, v[1], v[2]);
-  });
-  zoom.truth = truth_near.values();
+  // Near the window at full resolution: a second pass over the two paths' files.
+  for (const auto& [name, into] :
+       {std::pair{"/truth.csv", &zoom.truth}, std::pair{"/trajectory.csv", &zoom.estimate}}) {
+    NearPath near_path(near);
+    read_rows(dir + name, kPoseColumns, [&](std::uint64_t row, std::span<const double> v) {
+      near_path.offer(row, v[1], v[2]);
+    });
+    *into = near_path.values();
+  }
   // Under known association each estimate in the window is joined to the true landmark of its
   // id, wherever that is.
   std::unordered_map<double, Point> true_of;
@@ -1091,8 +1059,8 @@ void draw(const Run& run, AtomicFile& file) {
 
 }  // namespace
 
-void write_map_svg(const std::string& dir) {
-  const Run run = read_run(dir);
+void write_map_svg(const std::string& dir, const PicturePaths* paths) {
+  const Run run = read_run(dir, paths);
   AtomicFile file(dir + "/map.svg");
   draw(run, file);
   file.commit();

@@ -910,7 +910,7 @@ nlohmann::json run_once(const RunOptions& given, const std::function<void()>& ac
                 : std::make_unique<TraceWriter>(options.trace, options.trace_every, checkpointing);
   }
   RunRecorder recorder(info.header, tracked_point_offset(options, info.header), options.out,
-                       *resolved.rpe_delta);
+                       *resolved.rpe_delta, options.plot == "svg");
   std::unique_ptr<ScanStream> stream;
   if (!options.stream.empty()) stream = std::make_unique<ScanStream>(options.stream);
   Checkpointing checkpoint{options.checkpoint, options.checkpoint_every, identity, {}};
@@ -987,7 +987,7 @@ nlohmann::json run_once(const RunOptions& given, const std::function<void()>& ac
     if (!more.empty() && !r.failure) r.failure = more.front();
     errors.insert(errors.end(), more.begin(), more.end());
     if (errors.empty() && options.plot == "svg") {
-      draw_map_svg(options.out, options.quiet ? nullptr : text);
+      draw_map_svg(options.out, options.quiet ? nullptr : text, r.trajectories.picture.get());
     } else if (errors.empty() && options.plot == "png" && !options.plot_script.empty()) {
       draw_map(options.plot_script, options.out, text);
     }

@@ -275,9 +275,9 @@ std::vector<std::string> write_run_files(const std::string& dir, const RunFiles&
   return errors;
 }
 
-void draw_map_svg(const std::string& dir, std::FILE* out) {
+void draw_map_svg(const std::string& dir, std::FILE* out, const PicturePaths* paths) {
   try {
-    write_map_svg(dir);
+    write_map_svg(dir, paths);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "warning: map.svg not drawn: %s\n", e.what());
     return;

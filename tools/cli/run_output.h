@@ -21,6 +21,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "engine/filter.h"
+#include "tools/cli/map_picture.h"
 #include "tools/eval/innovation_stats.h"
 #include "tools/eval/particle_diagnostics.h"
 #include "tools/io/atomic_file.h"
@@ -128,10 +129,11 @@ struct RunFiles {
 std::vector<std::string> write_run_files(const std::string& dir, const RunFiles& files,
                                          std::FILE* out = stdout);
 
-// Draws DIR/map.svg from the run's files in DIR (tools/cli/map_picture.h) and says so on `out`
-// unless it is null. The run's results stand whatever happens, so a failure (a malformed file,
-// named with its line) is a warning on stderr.
-void draw_map_svg(const std::string& dir, std::FILE* out);
+// Draws DIR/map.svg from the run's files in DIR (tools/cli/map_picture.h), the position files
+// taken from `paths` when given, and says so on `out` unless it is null. The run's results
+// stand whatever happens, so a failure (a malformed file, named with its line) is a warning on
+// stderr.
+void draw_map_svg(const std::string& dir, std::FILE* out, const PicturePaths* paths = nullptr);
 
 // Runs `/usr/bin/python3 SCRIPT DIR`. The run's results stand whatever it does, so a failure
 // is a warning on stderr naming the command and its exit status.

@@ -15,6 +15,7 @@
 #include <thread>
 #include <utility>
 
+#include "tools/io/decimal.h"
 #include "tools/io/number_text.h"
 
 namespace fastslam::tools {
@@ -95,8 +96,9 @@ class RunRecorder::PoseFile {
  public:
   enum class Format { kCsv, kCsvPosition, kTum };
 
-  PoseFile(const std::string& path, Format format, Writer* writer)
-      : format_(format), file_(path), writer_(writer) {
+  // `picture`: the path this file's rows are also given to (CSV formats), or null.
+  PoseFile(const std::string& path, Format format, Writer* writer, PicturePath* picture = nullptr)
+      : format_(format), file_(path), writer_(writer), picture_(picture) {
     switch (format_) {
       case Format::kCsv:
         file_.write("t,x,y,theta\n");
@@ -172,7 +174,19 @@ class RunRecorder::PoseFile {
         append_tum(chunk_, p);
       } else {
         text_.clear();
-        text_.fixed(p.time, 3).put(',').fixed(p.x, 6).put(',').fixed(p.y, 6);
+        text_.fixed(p.time, 3).put(',');
+        const std::size_t x_begin = text_.view().size();
+        text_.fixed(p.x, 6);
+        const std::size_t x_end = text_.view().size();
+        text_.put(',').fixed(p.y, 6);
+        if (picture_ != nullptr) {
+          // The values a reader of this text gets, so the picture is the one the file draws.
+          const std::string_view t = text_.view();
+          double x = 0, y = 0;
+          parse_double(t.data() + x_begin, t.data() + x_end, x);
+          parse_double(t.data() + x_end + 1, t.data() + t.size(), y);
+          picture_->add(x, y);
+        }
         if (format_ == Format::kCsv) text_.put(',').fixed(p.theta, 6);
         chunk_.append(text_.put('\n').view());
       }
@@ -183,6 +197,7 @@ class RunRecorder::PoseFile {
   Format format_;
   AtomicFile file_;
   Writer* writer_;
+  PicturePath* picture_;  // written by the task only
   std::vector<StampedPose> pending_;
   // Used by the task only.
   std::string chunk_;
@@ -191,7 +206,7 @@ class RunRecorder::PoseFile {
 };
 
 RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
-                         const std::string& out_dir, double rpe_delta)
+                         const std::string& out_dir, double rpe_delta, bool picture)
     : reported_(reported),
       out_dir_(out_dir),
       dead_reckoning_(header.motion, header.start_pose, header.start_time),
@@ -201,13 +216,15 @@ RunRecorder::RunRecorder(const LogHeader& header, const engine::SensorOffset& re
       dr_gps_({.reference_heading = false, .rpe_delta = rpe_delta}, "dead reckoning's GPS error") {
   if (!out_dir_.empty()) {
     using F = PoseFile::Format;
+    if (picture) picture_ = std::make_shared<PicturePaths>();
     try {
       writer_ = std::make_unique<Writer>();
     } catch (const std::system_error&) {
       // No thread to be had: the files are written by the run's own thread.
     }
     trajectory_csv_ =
-        std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv, writer_.get());
+        std::make_unique<PoseFile>(out_dir_ + "/trajectory.csv", F::kCsv, writer_.get(),
+                                   picture_ ? &picture_->estimate : nullptr);
     trajectory_tum_ =
         std::make_unique<PoseFile>(out_dir_ + "/trajectory.tum", F::kTum, writer_.get());
   }
@@ -243,11 +260,12 @@ void RunRecorder::Scored::reference(const StampedPose& p) {
 }
 
 RunRecorder::PoseFile& RunRecorder::file(std::unique_ptr<PoseFile>& slot, const char* name,
-                                         bool position_only) {
+                                         bool position_only, PicturePath PicturePaths::*path) {
   if (!slot) {
     slot = std::make_unique<PoseFile>(
         out_dir_ + "/" + name,
-        position_only ? PoseFile::Format::kCsvPosition : PoseFile::Format::kCsv, writer_.get());
+        position_only ? PoseFile::Format::kCsvPosition : PoseFile::Format::kCsv, writer_.get(),
+        picture_ ? &(*picture_.*path) : nullptr);
   }
   return *slot;
 }
@@ -258,7 +276,9 @@ void RunRecorder::control(const Event& e) {
   if (!dead_reckoning_.available()) return;
   dr_truth_.estimate(dead_reckoning_.pose());
   dr_gps_.estimate(dead_reckoning_.pose());
-  if (!out_dir_.empty()) file(dr_csv_, "dead_reckoning.csv", false).add(dead_reckoning_.pose());
+  if (!out_dir_.empty())
+    file(dr_csv_, "dead_reckoning.csv", false, &PicturePaths::dead_reckoning)
+        .add(dead_reckoning_.pose());
 }
 
 void RunRecorder::truth(const Event& e) {
@@ -267,7 +287,7 @@ void RunRecorder::truth(const Event& e) {
   if (dead_reckoning_.available()) dr_truth_.reference(p);
   last_truth_ = p;
   ++truth_poses_;
-  if (!out_dir_.empty()) file(truth_csv_, "truth.csv", false).add(p);
+  if (!out_dir_.empty()) file(truth_csv_, "truth.csv", false, &PicturePaths::truth).add(p);
 }
 
 void RunRecorder::gps(const Event& e) {
@@ -275,7 +295,7 @@ void RunRecorder::gps(const Event& e) {
   filter_gps_.reference(p);
   if (dead_reckoning_.available()) dr_gps_.reference(p);
   ++gps_fixes_;
-  if (!out_dir_.empty()) file(gps_csv_, "gps.csv", true).add(p);
+  if (!out_dir_.empty()) file(gps_csv_, "gps.csv", true, &PicturePaths::gps).add(p);
 }
 
 void RunRecorder::estimates(std::span<const engine::TrajectoryPoint> points) {
@@ -354,6 +374,7 @@ RecordedRun RunRecorder::finish() {
     c.file->reset();
   }
   sync_directories(committed);
+  r.picture = picture_;  // every task that wrote to it has finished
   r.last_truth = last_truth_;
   r.truth_poses = truth_poses_;
   r.gps_fixes = gps_fixes_;

@@ -7,7 +7,9 @@
 // against GPS.
 //
 // The files' text is formatted and written by one background thread, a batch of poses at a time,
-// so the run's thread only queues the poses.
+// so the run's thread only queues the poses. Asked to, that thread also keeps the position
+// files' rows for the picture (tools/cli/map_picture.h), read from the text it writes, so that
+// the picture need not read the files back.
 //
 // Ownership: owns its files, their writer thread and the evaluators. Thread safety:
 // thread-compatible (the writer touches only what the files hand it). Costs: O(1) per control,
@@ -24,6 +26,7 @@
 #include <vector>
 
 #include "engine/filter.h"
+#include "tools/cli/map_picture.h"
 #include "tools/eval/dead_reckoning.h"
 #include "tools/eval/trajectory_metrics.h"
 #include "tools/io/atomic_file.h"
@@ -44,6 +47,8 @@ struct RecordedRun {
   std::optional<StampedPose> last_truth;
   std::uint64_t truth_poses = 0, gps_fixes = 0;
   std::vector<std::string> files;   // written, in order
+  // The position files as the picture takes them, when asked for (RunRecorder's `picture`).
+  std::shared_ptr<const PicturePaths> picture;
   std::vector<std::string> errors;  // one message per file that could not be written
   // Scores given up on (a reference out of time order, a pose not finite): the files and the
   // other scores stand.
@@ -54,10 +59,11 @@ class RunRecorder {
  public:
   // `header`: the source's start pose and motion model (dead reckoning's); `reported`: where
   // the source's pose sits from the point the filter tracks; `out_dir`: empty for no files;
-  // `rpe_delta`: metres of reference path per relative-error pair. Throws std::runtime_error
-  // naming a file it cannot create.
+  // `rpe_delta`: metres of reference path per relative-error pair; `picture`: keep the position
+  // files' rows for map.svg as they are written (RecordedRun::picture). Throws
+  // std::runtime_error naming a file it cannot create.
   RunRecorder(const LogHeader& header, const engine::SensorOffset& reported,
-              const std::string& out_dir, double rpe_delta);
+              const std::string& out_dir, double rpe_delta, bool picture = false);
   ~RunRecorder();
 
   void control(const Event& event);
@@ -74,7 +80,8 @@ class RunRecorder {
   class Writer;
   class PoseFile;
 
-  PoseFile& file(std::unique_ptr<PoseFile>& slot, const char* name, bool position_only);
+  PoseFile& file(std::unique_ptr<PoseFile>& slot, const char* name, bool position_only,
+                 PicturePath PicturePaths::*path);
 
   engine::SensorOffset reported_;
   std::string out_dir_;
@@ -93,6 +100,8 @@ class RunRecorder {
   Scored filter_truth_, filter_gps_, dr_truth_, dr_gps_;
   std::deque<double> control_times_;  // of controls not yet in an estimate batch
   std::uint64_t first_pending_control_ = 0;
+  // Filled by the files' tasks, each path by its own file's; read once the files are closed.
+  std::shared_ptr<PicturePaths> picture_;
   std::unique_ptr<Writer> writer_;  // before the files: it outlives their tasks
   std::unique_ptr<PoseFile> trajectory_csv_, trajectory_tum_, truth_csv_, gps_csv_, dr_csv_;
   std::optional<StampedPose> last_truth_;

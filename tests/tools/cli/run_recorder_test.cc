@@ -104,6 +104,46 @@ TEST_F(RunRecorderTest, WritesEveryPoseInOrderAsPrintfWould) {
   }
 }
 
+// The rows the writer keeps for the picture are the files' own: the picture drawn from them
+// is byte for byte the one drawn by reading the files back, past the paths' thinning bound and
+// with GPS fixes; without `picture` none are kept.
+TEST_F(RunRecorderTest, ThePictureOfTheKeptRowsIsThePictureOfTheFiles) {
+  const int poses = static_cast<int>(2 * kMaxPathPoints + 17);
+  RecordedRun run;
+  {
+    RunRecorder recorder(LogHeader{}, engine::SensorOffset{}, dir_.string(), 10.0, true);
+    for (int k = 0; k < 300; ++k) {
+      Event fix;
+      fix.kind = EventKind::kGps;
+      fix.time = 0.001 * k;
+      fix.x = 30.0 * std::cos(0.02 * k) - 1.0 / 3;
+      fix.y = 10.0 * std::sin(0.05 * k);
+      recorder.gps(fix);
+    }
+    feed(recorder, poses);
+    run = recorder.finish();
+  }
+  ASSERT_TRUE(run.errors.empty());
+  ASSERT_NE(run.picture, nullptr);
+  EXPECT_EQ(run.picture->estimate.rows().offered(), static_cast<std::uint64_t>(poses));
+  EXPECT_EQ(run.picture->gps.rows().offered(), 300u);
+  const auto picture = [&](const PicturePaths* paths) {
+    write_map_svg(dir_.string(), paths);
+    std::ifstream in(dir_ / "map.svg");
+    std::stringstream text;
+    text << in.rdbuf();
+    return text.str();
+  };
+  const std::string kept = picture(run.picture.get());
+  EXPECT_EQ(kept, picture(nullptr));
+  EXPECT_NE(kept.find("id=\"gps\""), std::string::npos);
+
+  fs::create_directories(dir_ / "plain");
+  RunRecorder plain(LogHeader{}, engine::SensorOffset{}, (dir_ / "plain").string(), 10.0);
+  feed(plain, 10);
+  EXPECT_EQ(plain.finish().picture, nullptr);
+}
+
 using fastslam::testing::FileSizeLimit;
 
 // The TUM file outgrows a size limit the CSV files stay under: the run learns of it while it
