@@ -102,15 +102,7 @@ void ParticleStore::gather(std::span<const std::uint32_t> index, std::size_t gra
     }
     if (first_child_[i] == kNoChild) first_child_[i] = static_cast<std::uint32_t>(k);
   }
-  // The targets keep their allocations between gathers; at an unchanged particle count the
-  // resizes do nothing, and every entry below is written before it is read.
-  Column& nx = x_spare_;
-  Column& ny = y_spare_;
-  Column& ntheta = theta_spare_;
-  Column& nv = v_spare_;
-  Column& nomega = omega_spare_;
-  Column& nlog_weight = log_weight_spare_;
-  for (Column* c : {&nx, &ny, &ntheta, &nv, &nomega, &nlog_weight}) c->resize(m);
+  Column nx(m), ny(m), ntheta(m), nv(m), nomega(m), nlog_weight(m);
   const bool carried = options_.pose_covariance == PoseCovariance::kCarried;
   if (carried) pose_cov_spare_.resize(m * kPoseCovStride);
   double* const ncov = pose_cov_spare_.data();

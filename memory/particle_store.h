@@ -11,9 +11,8 @@
 // Thread safety: thread-compatible. Distinct particles (column entries, maps) may be written by
 // distinct threads at once; `gather` needs exclusive use of the store.
 // Costs: column access O(1); `gather` O(M) plus the frees of the maps that die, in parallel
-// over TBB in the caller's arena after one serial pass over the indices; it keeps a second set
-// of columns and a second vector of M (empty) maps to gather into, so a gather at a constant
-// particle count allocates nothing.
+// over TBB in the caller's arena after one serial pass over the indices, allocating the new
+// columns (O(M)); it keeps a second vector of M (empty) maps to gather into.
 #pragma once
 
 #include <cstddef>
@@ -93,10 +92,7 @@ class ParticleStore {
   StoreOptions options_;
   Column x_, y_, theta_, v_, omega_, log_weight_;
   Column pose_cov_;
-  // The gather's targets, kept to reuse their allocations: the numeric columns in the order
-  // above, and (kCarried) the covariances.
-  Column x_spare_, y_spare_, theta_spare_, v_spare_, omega_spare_, log_weight_spare_;
-  Column pose_cov_spare_;
+  Column pose_cov_spare_;  // kCarried: the gather's target, kept to reuse its allocation
   std::vector<ParticleMap> maps_;
   std::vector<ParticleMap> maps_spare_;  // the gather's target: empty maps between gathers
   static constexpr std::uint32_t kNoChild = 0xFFFFFFFFu;
