@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <tuple>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -164,15 +165,19 @@ std::optional<Alignment> read_alignment(const nlohmann::json& metrics, const std
   return std::nullopt;
 }
 
-// A position file's rows as the picture takes them: from `given` when the run handed them
-// over, else read from `path` (nothing when it is absent).
-PicturePath take_path(const std::string& path, const std::vector<std::string>& columns,
-                      const PicturePath* given, std::size_t limit) {
-  if (given != nullptr) return *given;
-  PicturePath taken(limit);
-  read_rows(path, columns,
-            [&](std::uint64_t, std::span<const double> v) { taken.add(v[1], v[2]); });
-  return taken;
+// The four position files' rows read from `dir` (a path whose file is absent stays empty), for
+// a picture the run handed none to.
+PicturePaths read_paths(const std::string& dir) {
+  PicturePaths paths;
+  for (const auto& [name, columns, path] :
+       {std::tuple{"/truth.csv", &kPoseColumns, &paths.truth},
+        std::tuple{"/trajectory.csv", &kPoseColumns, &paths.estimate},
+        std::tuple{"/dead_reckoning.csv", &kPoseColumns, &paths.dead_reckoning},
+        std::tuple{"/gps.csv", &kFixColumns, &paths.gps}}) {
+    read_rows(dir + name, *columns,
+              [&](std::uint64_t, std::span<const double> v) { path->add(v[1], v[2]); });
+  }
+  return paths;
 }
 
 std::vector<Vertex> vertices(const PicturePath& path) {
@@ -208,16 +213,13 @@ Run read_run(const std::string& dir, const PicturePaths* paths) {
   run.true_stride = true_dots.stride();
   run.extent.add(true_box);
 
-  // The paths and the fixes.
-  const PicturePath truth =
-      take_path(dir + "/truth.csv", kPoseColumns, paths ? &paths->truth : nullptr, kMaxPathPoints);
-  const PicturePath estimate = take_path(dir + "/trajectory.csv", kPoseColumns,
-                                         paths ? &paths->estimate : nullptr, kMaxPathPoints);
-  const PicturePath dead_reckoning =
-      take_path(dir + "/dead_reckoning.csv", kPoseColumns, paths ? &paths->dead_reckoning : nullptr,
-                kMaxPathPoints);
-  const PicturePath gps =
-      take_path(dir + "/gps.csv", kFixColumns, paths ? &paths->gps : nullptr, kMaxDots);
+  // The paths and the fixes: the run's own rows, else the files'.
+  std::optional<PicturePaths> read;
+  if (paths == nullptr) paths = &read.emplace(read_paths(dir));
+  const PicturePath& truth = paths->truth;
+  const PicturePath& estimate = paths->estimate;
+  const PicturePath& dead_reckoning = paths->dead_reckoning;
+  const PicturePath& gps = paths->gps;
   run.truth = vertices(truth);
   run.estimate = vertices(estimate);
   run.dead_reckoning = vertices(dead_reckoning);
