@@ -6,9 +6,8 @@
 // Costs: O(bytes read), read in blocks of 4 KiB growing to 64 KiB (a small file costs a small
 // buffer), lines found with memchr and parsed where they lie in the block (a line across two
 // blocks is copied once), each field parsed as it is cut (tools/io/decimal.h); no allocation
-// per row. A line is held to
-// kMaxLogLineBytes (tools/io/log_format.h): a longer one (a file with no newline) is refused, not
-// read whole.
+// per row. A line is held to kMaxLogLineBytes (tools/io/log_format.h): a longer one (a file with
+// no newline) is refused, not read whole.
 #pragma once
 
 #include <cstddef>
@@ -46,7 +45,7 @@ class CsvReader {
   void parse_row(std::string_view line, std::span<double> out) const;
   // Reads the next block; false at the end of the file.
   bool fill();
-  // text_'s comma-separated fields, trimmed, into fields_.
+  // text_'s comma-separated fields, trimmed, into fields_ (the header's check).
   void split();
 
   std::string path_;
