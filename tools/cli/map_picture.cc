@@ -174,8 +174,9 @@ PicturePaths read_paths(const std::string& dir) {
         std::tuple{"/trajectory.csv", &kPoseColumns, &paths.estimate},
         std::tuple{"/dead_reckoning.csv", &kPoseColumns, &paths.dead_reckoning},
         std::tuple{"/gps.csv", &kFixColumns, &paths.gps}}) {
+    PicturePath* into = path;  // clang 14 lambdas cannot capture a structured binding
     read_rows(dir + name, *columns,
-              [&](std::uint64_t, std::span<const double> v) { path->add(v[1], v[2]); });
+              [into](std::uint64_t, std::span<const double> v) { into->add(v[1], v[2]); });
   }
   return paths;
 }
