@@ -48,8 +48,11 @@ struct RunResult {
   RecordedRun trajectories;
   std::optional<MapScores> map;  // when the source has true landmarks
   double open_seconds = 0.0;     // opening the source: reading and parsing a recorded one
-  double source_seconds = 0.0;   // its events after that (for a simulator: simulating)
-  double filter_seconds = 0.0;   // the filter, trace rows excluded
+  // Its events after that (for a simulator: simulating), with the recording of truth poses
+  // and GPS fixes.
+  double source_seconds = 0.0;
+  // The filter on controls and scans, with the recording of its estimates; trace rows excluded.
+  double filter_seconds = 0.0;
   // Each scan's update (Filter::observe, what a streaming caller waits for per scan) in this
   // process: after a resume, the scans since it.
   LatencyHistogram scan_latency;

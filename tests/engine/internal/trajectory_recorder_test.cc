@@ -239,5 +239,38 @@ TEST(TrajectoryRecorderTest, WeightsOfABlock) {
   for (std::size_t l = 3; l < kG; ++l) EXPECT_EQ(w[l], 0.0);
 }
 
+
+// The shift (the largest log-weight) and the uniform flag are std::minmax_element's values for
+// every length (the four-lane loop and its tail), wherever the extremes sit, with ties, infinities
+// and NaNs.
+TEST(TrajectoryRecorderTest, ShiftAndUniformAreTheLogWeightsRange) {
+  std::mt19937_64 rng(5);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (std::size_t m = 1; m <= 40; ++m) {
+    for (int trial = 0; trial < 200; ++trial) {
+      std::vector<double> l(m);
+      const int kind = trial % 5;
+      for (double& v : l) {
+        v = kind == 0 ? -std::ldexp(static_cast<double>(rng() % 8), static_cast<int>(rng() % 3))
+                      : -static_cast<double>(rng() % 1000) / 7.0;
+      }
+      if (kind == 2) l[rng() % m] = -inf;
+      if (kind == 3) l[rng() % m] = nan;
+      if (kind == 4) std::fill(l.begin(), l.end(), -2.5);
+      TrajectoryRecorder recorder;
+      recorder.begin(l, 1);
+      const auto [lo, hi] = std::minmax_element(l.begin(), l.end());
+      const TrajectorySums& sums = recorder.sums();
+      if (std::isnan(*hi)) {
+        EXPECT_TRUE(std::isnan(sums.shift)) << m;
+      } else {
+        EXPECT_EQ(sums.shift, *hi) << m << " " << kind;
+      }
+      EXPECT_EQ(sums.uniform, *lo == *hi) << m << " " << kind;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fastslam::engine::internal
