@@ -239,7 +239,6 @@ TEST(TrajectoryRecorderTest, WeightsOfABlock) {
   for (std::size_t l = 3; l < kG; ++l) EXPECT_EQ(w[l], 0.0);
 }
 
-
 // The shift (the largest log-weight) and the uniform flag are std::minmax_element's values for
 // every length (the four-lane loop and its tail), wherever the extremes sit, with ties, infinities
 // and NaNs.
