@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "engine/internal/filter_state.h"
+#include "engine/internal/weight_range.h"
 #include "parallel/collective.h"
 
 namespace fastslam::engine::internal {
@@ -28,10 +29,7 @@ struct BestParticle {
 
 inline BestParticle best_particle(const FilterState& s) {
   const std::span<const double> lw = s.store.log_weight();
-  std::size_t best = 0;
-  for (std::size_t i = 1; i < lw.size(); ++i) {
-    if (lw[i] > lw[best]) best = i;
-  }
+  const std::size_t best = first_largest(lw);
   BestParticle b{lw[best], s.first_particle + best, 0, true, best};
   if (s.group == nullptr) return b;
   struct Candidate {

@@ -8,6 +8,7 @@
 #include <span>
 #include <utility>
 
+#include "engine/internal/weight_range.h"
 #include "parallel/vector_math.h"
 
 namespace fastslam::engine::internal {
@@ -30,42 +31,15 @@ using Four = double __attribute__((vector_size(32)));
   return (q[0] + q[2]) + (q[1] + q[3]);
 }
 
-// The smallest and largest log weight, the values std::minmax_element gives. Its pointer chase
-// is bound by load latency (~2.5 ns a particle, on the pass's calling thread every scan); these
-// selects vectorise. A NaN makes the result depend on where it sits, so that input goes to the
-// library. (The two may differ in the sign of a zero, which no use of the values can see.)
+// The smallest and largest log weight, the values std::minmax_element gives. A NaN makes its
+// result depend on where the NaN sits, so that input goes to the library.
 std::pair<double, double> log_weight_range(std::span<const double> l) {
-  // Four lanes of selects (GCC does not vectorise a select reduction of doubles by itself), then
-  // the lanes and the tail.
-  Four low4 = {l[0], l[0], l[0], l[0]};
-  Four high4 = low4;
-  Four nan4 = {};
-  std::size_t i = 0;
-  for (; i + 4 <= l.size(); i += 4) {
-    Four v;
-    std::memcpy(&v, l.data() + i, sizeof(Four));
-    low4 = v < low4 ? v : low4;
-    high4 = v > high4 ? v : high4;
-    nan4 = v != v ? v : nan4;
-  }
-  double low = low4[0];
-  double high = high4[0];
-  bool nan = nan4[0] != 0.0 || nan4[1] != 0.0 || nan4[2] != 0.0 || nan4[3] != 0.0;
-  for (int k = 1; k < 4; ++k) {
-    low = low4[k] < low ? low4[k] : low;
-    high = high4[k] > high ? high4[k] : high;
-  }
-  for (; i < l.size(); ++i) {
-    const double v = l[i];
-    low = v < low ? v : low;
-    high = v > high ? v : high;
-    nan |= v != v;
-  }
-  if (nan) {
+  const SelectRange r = select_range(l);
+  if (r.nan) {
     const auto [lo, hi] = std::minmax_element(l.begin(), l.end());
     return {*lo, *hi};
   }
-  return {low, high};
+  return {r.low, r.high};
 }
 
 }  // namespace
