@@ -85,6 +85,8 @@ void validate(const FilterConfig& c) {
           "detection.probability must be in (0, 1]");
   require(std::isfinite(c.detection.clutter_density) && c.detection.clutter_density >= 0,
           "detection.clutter_density must be finite and >= 0");
+  require(std::isfinite(c.loop_closure.reach) && c.loop_closure.reach >= 0,
+          "loop_closure.reach must be finite and >= 0");
 }
 
 }  // namespace fastslam::engine

@@ -143,6 +143,22 @@ struct DetectionConfig {
   double clutter_density = 0.0;  // false alarms per m² per scan, >= 0; 0: no clutter model
 };
 
+// Loop closure for unknown association (ml, das), by matching the particle's map against
+// itself. Once resampling has left every particle with one drifted history, an old landmark seen
+// again lies outside every particle's gate and is started anew: each particle maps it twice and
+// the loop never closes (docs/association.md, "Loop closure"). When a landmark is confirmed,
+// the particle pairs its recent landmarks (confirmed, associated within `min_age` steps, within
+// the sensor's range) with its old ones (confirmed, not associated for `min_age` steps): a recent
+// landmark pairs with the one old landmark within `reach` metres, and with none when there are
+// several. When at least two pairs agree on one rigid motion (their distances within the pairs'
+// uncertainty), the particle's pose and its recent landmarks move by the least-squares motion
+// onto the old ones; the twins then lie together, association takes one of each and negative
+// information removes the other. reach 0: off, and every run is bit for bit what it was.
+struct LoopClosureConfig {
+  double reach = 10.0;           // m, >= 0: the largest drift a loop closes over
+  std::uint64_t min_age = 2000;  // steps (controls and scans) that separate old from recent
+};
+
 // EKF-SLAM (Algorithm::kEkf) with maximum-likelihood association: gates on the squared
 // Mahalanobis distance d2 = v^T S^-1 v of an observation to a landmark (chi-square with 2 degrees
 // of freedom when the association is right). An observation takes the nearest landmark (smallest
@@ -190,6 +206,7 @@ struct FilterConfig {
   double initial_pose[5] = {0, 0, 0, 0, 0};
   // Last, so that a saved state's earlier fields keep their offsets (engine/internal/state_io).
   DetectionConfig detection;  // FastSLAM with ml or das (the EKF baseline ignores it)
+  LoopClosureConfig loop_closure;  // FastSLAM with ml or das (the EKF baseline ignores it)
 };
 
 // Throws std::invalid_argument naming the first unusable field (zero particles, a non-positive

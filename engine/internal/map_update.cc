@@ -17,10 +17,12 @@ void update_chosen(const MapUpdateInput& in, const Pose& pose,
                    std::span<const std::int64_t> assignment,
                    std::span<const LandmarkObservation> terms,
                    std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
-                   std::vector<memory::Slot>& touched, std::vector<std::uint32_t>& observed) {
+                   std::vector<memory::Slot>& touched, std::vector<std::uint32_t>& observed,
+                   std::vector<memory::Slot>& confirmed) {
   const auto step_now = static_cast<std::int64_t>(in.scan_step);
   touched.clear();
   observed.clear();
+  confirmed.clear();
   for (std::size_t j = 0; j < scan.size(); ++j) {
     if (assignment[j] == kNewLandmark) continue;
     touched.push_back(static_cast<memory::Slot>(assignment[j]));
@@ -37,7 +39,11 @@ void update_chosen(const MapUpdateInput& in, const Pose& pose,
           apply_update(lm, terms[chosen_terms[j]], in.r);
         }
         store_gaussian(lm, stored);
+        const bool provisional = !(stored.log_odds >= in.existence.confirm_at);
         stored.log_odds += in.existence.seen;
+        if (provisional && stored.log_odds >= in.existence.confirm_at) {
+          confirmed.push_back(touched[k]);
+        }
         stored.last_seen = step_now;
       },
       largest_variance);
@@ -92,7 +98,7 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
                          MapUpdateScratch& scratch, MapUpdateCounts& counts) {
   update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, scratch.touched,
-                      scratch.observed);
+                      scratch.observed, scratch.confirmed);
   const ExistenceConfig& ex = in.existence;
   if (ex.negative_information && in.max_range > ex.range_margin) {
     apply_negative_information(in, pose, map, scratch, counts);

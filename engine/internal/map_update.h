@@ -37,6 +37,7 @@ struct MapUpdateScratch {
   std::vector<memory::Slot> touched;    // the chosen landmarks
   std::vector<std::uint32_t> observed;  // their observations
   std::vector<memory::SpatialEntry> in_view;
+  std::vector<memory::Slot> confirmed;  // the chosen landmarks whose log-odds reached confirm_at
 };
 
 // What the map update reads besides the particle.

@@ -19,6 +19,7 @@
 #include "engine/internal/filter_state.h"
 #include "engine/internal/fs2_draw.h"
 #include "engine/internal/known_update.h"
+#include "engine/internal/loop_closure.h"
 #include "engine/internal/map_update.h"
 #include "engine/internal/motion_normals_ahead.h"
 #include "engine/internal/motion_pass.h"
@@ -40,6 +41,7 @@ struct PassScratch {
   std::vector<std::uint32_t> chosen_terms;  // 1.0: observation j's terms in search.terms
   std::vector<memory::Slot> taken;          // DAS scratch
   MapUpdateScratch map;
+  LoopClosureScratch loop;
 };
 
 // The stages' inputs of one pass.
@@ -48,6 +50,7 @@ struct PassInputs {
   KnownInput known;
   SearchInput search;
   MapUpdateInput map;
+  LoopClosureInput loop;
   std::uint64_t scan_step = 0;
   bool record = false;
 };
@@ -102,6 +105,7 @@ class ParticlePass final : public Pass {
     in.search.variance_bound = s_.landmark_variance_bound;
     in.search.bearings = bearings_;
     in.map = {&s_.sensor, s_.r, c.existence, c.sensor.max_range, c.sensor.field_of_view, scan_step};
+    in.loop = {c.loop_closure, c.existence.confirm_at, c.sensor.max_range, scan_step};
     in.scan_step = scan_step;
     in.record = c.record_trajectory && !s_.pending.empty();
     return in;
@@ -212,6 +216,14 @@ class ParticlePass final : public Pass {
       update_particle_map<kFs2>(in.map, pose, scan, scratch.assignment, scratch.search.terms,
                                 scratch.chosen_terms, s_.store.map(i),
                                 scratch.map, counts);
+      if (in.loop.config.reach > 0.0 && !scratch.map.confirmed.empty()) {
+        Pose moved = pose;
+        if (close_loop(in.loop, scratch.map.confirmed, s_.store.map(i), moved, scratch.loop)) {
+          s_.store.x()[i] = moved[0];
+          s_.store.y()[i] = moved[1];
+          s_.store.theta()[i] = moved[2];
+        }
+      }
       mark = Clock::now();
     }
     return associate_seconds;

@@ -68,6 +68,10 @@ void expect_same(const FilterConfig& a, const FilterConfig& b) {
   FASTSLAM_SAME_BITS(ekf.gate_new);
   FASTSLAM_SAME(ekf.joint_compatibility);
   for (int i = 0; i < 5; ++i) FASTSLAM_SAME_BITS(initial_pose[i]);
+  FASTSLAM_SAME_BITS(detection.probability);
+  FASTSLAM_SAME_BITS(detection.clutter_density);
+  FASTSLAM_SAME_BITS(loop_closure.reach);
+  FASTSLAM_SAME(loop_closure.min_age);
 #undef FASTSLAM_SAME
 #undef FASTSLAM_SAME_BITS
 }
@@ -110,6 +114,10 @@ FilterConfig unusual_config() {
   c.ekf.gate_new = 4503599627370497.0;
   c.ekf.joint_compatibility = true;
   for (int i = 0; i < 5; ++i) c.initial_pose[i] = std::nextafter(i + 0.5, 10.0);
+  c.detection.probability = 0.1 + 0.7;
+  c.detection.clutter_density = 1e-5 / 3;
+  c.loop_closure.reach = 0.1 * 3;
+  c.loop_closure.min_age = 18446744073709551615ULL;
   return c;
 }
 
@@ -213,7 +221,9 @@ TEST(ConfigJson, WritesEveryKey) {
                                           "ekf.joint_compatibility",
                                           "initial_pose",
                                           "detection.probability",
-                                          "detection.clutter_density"};
+                                          "detection.clutter_density",
+                                          "loop_closure.reach",
+                                          "loop_closure.min_age"};
   EXPECT_EQ(paths, expected);
 }
 

@@ -541,6 +541,15 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "metres inside the sensor range where a missed landmark counts (ml, das)")
       ->check(non_negative_number())
       ->capture_default_str();
+  cmd.add_option("--loop-closure-reach", f.loop_closure.reach,
+                 "metres: the largest drift a loop closes over when a particle matches its "
+                 "recent landmarks to its old ones; 0: no loop closure (ml, das)")
+      ->check(non_negative_number())
+      ->capture_default_str();
+  cmd.add_option("--loop-closure-min-age", f.loop_closure.min_age,
+                 "steps (controls and scans) without an association that make a landmark old "
+                 "for loop closure (ml, das)")
+      ->capture_default_str();
   cmd.add_option("--clutter", o.sim.clutter_rate,
                  "simulated false alarms per scan (Poisson mean; ml, das)")
       ->check(number_in(0.0, 1000.0))

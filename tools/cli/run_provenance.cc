@@ -89,6 +89,8 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"existence-missed", config.existence.missed},
       {"existence-confirm-at", config.existence.confirm_at},
       {"existence-range-margin", config.existence.range_margin},
+      {"loop-closure-reach", config.loop_closure.reach},
+      {"loop-closure-min-age", config.loop_closure.min_age},
       {"ekf-gate-accept", config.ekf.gate_accept},
       {"ekf-gate-new", config.ekf.gate_new},
       {"ekf-jcbb", config.ekf.joint_compatibility},

@@ -69,6 +69,10 @@ ACCURACY = [
        f"{WEBMAP} --algorithm fastslam2 --association ml --motion-draw control"),
       ("FastSLAM 1.0, DAS", f"{WEBMAP} --algorithm fastslam1 --association das"),
       ("FastSLAM 2.0, DAS", f"{WEBMAP} --algorithm fastslam2 --association das"),
+      ("FastSLAM 1.0, ML, no loop closure",
+       f"{WEBMAP} --algorithm fastslam1 --association ml --loop-closure-reach 0"),
+      ("FastSLAM 2.0, ML, no loop closure",
+       f"{WEBMAP} --algorithm fastslam2 --association ml --loop-closure-reach 0"),
       ("FastSLAM 2.0, M = 1, known ids", f"{WEBMAP} --algorithm fastslam2 --particles 1"),
       ("EKF-SLAM, known ids", f"{WEBMAP} --algorithm ekf --association known"),
       ("EKF-SLAM, ML", f"{WEBMAP} --algorithm ekf --association ml")]),
@@ -78,7 +82,9 @@ ACCURACY = [
      "`--clutter 2 --detection-probability 0.8`: a Poisson number of false alarms per scan "
      "(mean 2) uniform over the sensor's footprint, and each true landmark in view detected with "
      "probability 0.8; the filter weighs \"no landmark\" against that false-alarm density and "
-     "detection probability (docs/association.md, \"False alarms and missed detections: the detection model\"). "
+     "detection probability (docs/association.md, \"False alarms and missed detections: the detection model\"); "
+     "unknown association closes loops by matching each particle's map against itself (docs/association.md, \"Loop closure\"; "
+     "off in the rows \"no loop closure\"). "
      "Pose RMSE after the best rigid fit, against dead reckoning's; landmarks: "
      "in the most likely particle's reported map (30 true ones are observed); false and missed: "
      "GOSPA's unassigned estimated and true landmarks (cutoff 5 m) after the path's alignment. "
@@ -96,7 +102,11 @@ ACCURACY = [
       ("FastSLAM 1.0, ML, no clutter, P_D = 1",
        f"{WEBMAP} --algorithm fastslam1 --association ml"),
       ("FastSLAM 1.0, ML, per-control motion draw",
-       f"{WEBMAP} {CLUTTER} --algorithm fastslam1 --association ml --motion-draw control")]),
+       f"{WEBMAP} {CLUTTER} --algorithm fastslam1 --association ml --motion-draw control"),
+      ("FastSLAM 1.0, ML, no loop closure",
+       f"{WEBMAP} {CLUTTER} --algorithm fastslam1 --association ml --loop-closure-reach 0"),
+      ("FastSLAM 2.0, ML, no loop closure",
+       f"{WEBMAP} {CLUTTER} --algorithm fastslam2 --association ml --loop-closure-reach 0")]),
     ("victoria-park", "Victoria Park (real, 61945 controls, 7249 scans, 4466 GPS fixes)",
      ["gps_rmse_m", "gps_rmse_aligned_m", "dead_reckoning.gps_rmse_m", "landmarks"],
      "GPS RMSE over every fix, the estimate interpolated at the fix's time; aligned: after the "

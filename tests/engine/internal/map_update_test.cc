@@ -54,6 +54,7 @@ struct World {
     in.existence.seen = 0.5;
     in.existence.missed = 0.6;
     in.existence.remove_below = 0.0;
+    in.existence.confirm_at = 1.5;  // within reach of the log-odds below: some are confirmed
     in.existence.range_margin = 1.0;
     in.max_range = 15.0;
     in.field_of_view = 2.0;
@@ -116,6 +117,7 @@ TEST(MapUpdateTest, MatchesTheOracle) {
   update_particle_map<true>(w.in, w.pose, w.scan, w.assignment, {}, {}, w.map, scratch, counts);
   std::map<memory::Slot, memory::Landmark> want = w.oracle;
   std::uint64_t removed = 0;
+  std::vector<memory::Slot> confirmed;  // chosen, and their log-odds reached confirm_at
   for (auto it = want.begin(); it != want.end();) {
     memory::Landmark& l = it->second;
     const auto chosen = std::find(w.assignment.begin(), w.assignment.end(), it->first);
@@ -123,6 +125,9 @@ TEST(MapUpdateTest, MatchesTheOracle) {
       LandmarkGaussian g = to_gaussian(l);
       update_landmark(w.sensor, g, w.pose, w.scan[chosen - w.assignment.begin()].z, w.in.r);
       store_gaussian(g, l);
+      if (l.log_odds < w.in.existence.confirm_at && l.log_odds + 0.5 >= w.in.existence.confirm_at) {
+        confirmed.push_back(it->first);
+      }
       l.log_odds += 0.5;
       l.last_seen = 33;
     } else if (w.in_view(l)) {
@@ -137,6 +142,10 @@ TEST(MapUpdateTest, MatchesTheOracle) {
   }
   EXPECT_GT(removed, 0u);
   EXPECT_EQ(counts.removed, removed);
+  ASSERT_GT(confirmed.size(), 0u);
+  std::vector<memory::Slot> got = scratch.confirmed;
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, confirmed);
   EXPECT_EQ(counts.created, 3u);
   std::size_t new_seen = 0;
   for (const auto [slot, l] : w.map) {
