@@ -148,12 +148,13 @@ struct DetectionConfig {
 // again lies outside every particle's gate and is started anew: each particle maps it twice and
 // the loop never closes (docs/association.md, "Loop closure"). When a landmark is confirmed,
 // the particle pairs its recent landmarks (confirmed, associated within `min_age` steps, within
-// the sensor's range) with its old ones (confirmed, not associated for `min_age` steps): a recent
-// landmark pairs with the one old landmark within `reach` metres, and with none when there are
-// several. When at least two pairs agree on one rigid motion (their distances within the pairs'
-// uncertainty), the particle's pose and its recent landmarks move by the least-squares motion
-// onto the old ones; the twins then lie together, association takes one of each and negative
-// information removes the other. reach 0: off, and every run is bit for bit what it was.
+// the sensor's range) with its old ones (confirmed, not associated for `min_age` steps): two
+// pair when each is the other's only confirmed neighbour within `reach` metres, so maps denser
+// than the reach never pair. When there are two pairs or more and all agree on one rigid motion
+// (their distances within the pairs' uncertainty), the particle's pose and its recent landmarks
+// move by the least-squares motion onto the old ones; the twins then lie together, association
+// takes one of each and negative information removes the other. reach 0: off, and every run is
+// bit for bit what it was.
 struct LoopClosureConfig {
   double reach = 10.0;           // m, >= 0: the largest drift a loop closes over
   std::uint64_t min_age = 2000;  // steps (controls and scans) that separate old from recent
@@ -205,7 +206,7 @@ struct FilterConfig {
   // kBrownianCurvature).
   double initial_pose[5] = {0, 0, 0, 0, 0};
   // Last, so that a saved state's earlier fields keep their offsets (engine/internal/state_io).
-  DetectionConfig detection;  // FastSLAM with ml or das (the EKF baseline ignores it)
+  DetectionConfig detection;       // FastSLAM with ml or das (the EKF baseline ignores it)
   LoopClosureConfig loop_closure;  // FastSLAM with ml or das (the EKF baseline ignores it)
 };
 

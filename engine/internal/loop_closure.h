@@ -5,27 +5,27 @@
 // lies outside every particle's gate and is mapped a second time; the particle's recent map is
 // then a shifted and turned copy of part of its old map. Recent: confirmed, associated fewer
 // than min_age steps ago; old: confirmed, not associated for min_age steps. A recent landmark
-// pairs with the one old landmark within `reach` (none when there are several: a pair must not be
-// a guess among neighbours, which also keeps dense maps from ever pairing). Pairs taken by the
-// same rigid motion keep their distances: the largest set of pairs whose distances agree within
-// three standard deviations of the landmarks' own (`consistent_pairs`), if it has two pairs or
-// more, gives the least-squares rigid motion of its recent landmarks onto its old ones
-// (`fit_rigid_motion`), and the particle's pose and every landmark associated within min_age
-// steps move by it (`move_recent`). The twins then lie together: association takes one of each
+// and an old one pair when each is the other's only confirmed neighbour within `reach` (a pair
+// must not be a guess among neighbours, which also keeps maps denser than the reach from ever
+// pairing) and they lie farther apart than their own uncertainty. Pairs taken by one rigid
+// motion keep their distances: when there are two pairs or more and every two agree within three
+// standard deviations of the landmarks' own (`pairs_agree`; a twin that disagrees is evidence
+// that they are not all twins), the least-squares rigid motion of the recent landmarks onto the
+// old ones (`fit_rigid_motion`) moves the particle's pose and every landmark associated within
+// min_age steps (`move_recent`). The twins then lie together: association takes one of each
 // and negative information removes the other. The particle's weight is not changed: this is a
 // correction of its map, as a map join is, not a draw.
 //
 // The search starts from the landmarks this scan confirmed and goes on only when one of them has
-// a twin, so a scan with no loop in sight costs one disc query of radius `reach` per landmark it
-// confirmed. Thread safety: writes only the particle's map; concurrent calls on distinct
-// particles with distinct scratch are safe. Costs: on a closure, O(N) over the particle's map
-// (the recent landmarks are found by their last association, which the index does not hold) and
-// the moved landmarks' path copies; the pair set is searched exhaustively over at most
-// kMaxPairs pairs (2^kMaxPairs subsets, only when a closure is possible).
+// a twin, so a scan with no loop in sight costs one or two disc queries of radius `reach` per
+// landmark it confirmed, each reading at most two landmarks. Thread safety: writes only the
+// particle's map; concurrent calls on distinct particles with distinct scratch are safe. Costs:
+// O(k^2) agreement tests for k pairs; on a closure, O(N) over the particle's map (the recent
+// landmarks are found by their last association, which the index does not hold) and the moved
+// landmarks' path copies.
 #pragma once
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <span>
@@ -59,9 +59,6 @@ struct LoopPair {
   double variance = 0.0;
 };
 
-// The pairs searched at most (the nearest twins first): 2^kMaxPairs subsets.
-inline constexpr std::size_t kMaxPairs = 10;
-
 // p -> to + R(turn) (p - from): the motion of the recent map onto the old one.
 struct RigidMotion {
   Eigen::Vector2d from = Eigen::Vector2d::Zero();
@@ -81,25 +78,20 @@ struct LoopClosureScratch {
 };
 
 // The least-squares rigid motion taking the pairs' `a` onto their `b` (2-D Procrustes: the
-// centroids, and the angle of the cross-covariance), over the pairs whose bit is set in `mask`.
-// REQUIRES: at least one bit set, pairs.size() <= 64.
-inline RigidMotion fit_rigid_motion(std::span<const LoopPair> pairs, std::uint64_t mask) {
+// centroids, and the angle of the cross-covariance). REQUIRES: at least one pair.
+inline RigidMotion fit_rigid_motion(std::span<const LoopPair> pairs) {
   RigidMotion m;
-  double n = 0.0;
-  for (std::size_t k = 0; k < pairs.size(); ++k) {
-    if (((mask >> k) & 1u) == 0) continue;
-    m.from += pairs[k].a;
-    m.to += pairs[k].b;
-    n += 1.0;
+  for (const LoopPair& p : pairs) {
+    m.from += p.a;
+    m.to += p.b;
   }
-  m.from /= n;
-  m.to /= n;
+  m.from /= static_cast<double>(pairs.size());
+  m.to /= static_cast<double>(pairs.size());
   double dot = 0.0;
   double cross = 0.0;
-  for (std::size_t k = 0; k < pairs.size(); ++k) {
-    if (((mask >> k) & 1u) == 0) continue;
-    const Eigen::Vector2d a = pairs[k].a - m.from;
-    const Eigen::Vector2d b = pairs[k].b - m.to;
+  for (const LoopPair& p : pairs) {
+    const Eigen::Vector2d a = p.a - m.from;
+    const Eigen::Vector2d b = p.b - m.to;
     dot += a.dot(b);
     cross += a[0] * b[1] - a[1] * b[0];
   }
@@ -125,32 +117,14 @@ inline bool pairs_agree(const LoopPair& j, const LoopPair& k, double reach) {
   return tolerance <= kAgreementShare * reach && std::fabs(recent - old) <= tolerance;
 }
 
-// The largest set of pairs that agree two by two (pairs_agree), as a bit mask (0 when no two
-// agree); among sets of one size, the one with the smallest mask. Exhaustive. REQUIRES:
-// pairs.size() <= kMaxPairs.
-inline std::uint64_t consistent_pairs(std::span<const LoopPair> pairs, double reach) {
-  const std::size_t k = pairs.size();
-  std::uint64_t agree[kMaxPairs] = {};
-  for (std::size_t i = 0; i < k; ++i) {
-    for (std::size_t j = 0; j < k; ++j) {
-      if (i != j && pairs_agree(pairs[i], pairs[j], reach)) agree[i] |= std::uint64_t{1} << j;
+// Whether every two of the pairs agree (pairs_agree). O(k^2).
+inline bool all_pairs_agree(std::span<const LoopPair> pairs, double reach) {
+  for (std::size_t i = 0; i < pairs.size(); ++i) {
+    for (std::size_t j = i + 1; j < pairs.size(); ++j) {
+      if (!pairs_agree(pairs[i], pairs[j], reach)) return false;
     }
   }
-  std::uint64_t best = 0;
-  int best_size = 1;
-  for (std::uint64_t mask = 1; mask < (std::uint64_t{1} << k); ++mask) {
-    const int size = std::popcount(mask);
-    if (size <= best_size) continue;
-    bool clique = true;
-    for (std::size_t i = 0; i < k && clique; ++i) {
-      if (((mask >> i) & 1u) != 0) clique = (mask & ~(std::uint64_t{1} << i) & ~agree[i]) == 0;
-    }
-    if (clique) {
-      best = mask;
-      best_size = size;
-    }
-  }
-  return best;
+  return true;
 }
 
 // Every landmark of `map` associated fewer than min_age steps ago moves by `motion` (mean, and
@@ -194,27 +168,25 @@ inline bool old_enough(const LoopClosureInput& in, const memory::Landmark& l) {
 inline bool pair_with_twin(const LoopClosureInput& in, const memory::ParticleMap& map,
                            memory::Slot slot, std::vector<LoopPair>& pairs) {
   const memory::LandmarkTree& tree = map.tree();
+  // The one confirmed landmark within reach of `at` other than `self` (and false when there
+  // are none or several); stops reading landmarks once two are found.
+  const auto only_neighbour = [&](const memory::Landmark& at, memory::Slot self,
+                                  memory::Slot& found) {
+    std::size_t n = 0;
+    map.index().within(at.x, at.y, in.config.reach, [&](const memory::SpatialEntry& e) {
+      if (n > 1 || e.slot == self) return;
+      if (!(tree.at(e.slot).log_odds >= in.confirm_at)) return;
+      ++n;
+      found = e.slot;
+    });
+    return n == 1;
+  };
   const memory::Landmark& l = tree.at(slot);
-  std::size_t twins = 0;
   memory::Slot twin = 0;
-  map.index().within(l.x, l.y, in.config.reach, [&](const memory::SpatialEntry& e) {
-    if (twins > 1 || e.slot == slot) return;  // two decide already: the pair is off
-    const memory::Landmark& o = tree.at(e.slot);
-    if (!old_enough(in, o) || !(o.log_odds >= in.confirm_at)) return;
-    ++twins;
-    twin = e.slot;
-  });
-  if (twins != 1) return false;
+  if (!only_neighbour(l, slot, twin)) return false;
   const memory::Landmark& o = tree.at(twin);
-  // And the old one has no other recent confirmed landmark within reach: twins both ways.
-  std::size_t recent = 0;
-  map.index().within(o.x, o.y, in.config.reach, [&](const memory::SpatialEntry& e) {
-    if (recent > 1 || e.slot == twin) return;
-    const memory::Landmark& r = tree.at(e.slot);
-    if (old_enough(in, r) || !(r.log_odds >= in.confirm_at)) return;
-    ++recent;
-  });
-  if (recent != 1) return false;
+  memory::Slot back = 0;
+  if (!old_enough(in, o) || !only_neighbour(o, twin, back) || back != slot) return false;
   // Twins within their own uncertainty of each other are one landmark mapped twice, not a drift.
   const double variance = l.sxx + l.syy + o.sxx + o.syy;
   if ((Eigen::Vector2d(l.x, l.y) - Eigen::Vector2d(o.x, o.y)).squaredNorm() <= 9.0 * variance) {
@@ -243,20 +215,12 @@ inline bool close_loop(const LoopClosureInput& in, std::span<const memory::Slot>
     if (loop_closure_detail::old_enough(in, l) || !(l.log_odds >= in.confirm_at)) return;
     pair_with_twin(in, map, e.slot, pairs);
   });
-  if (pairs.size() < 2) return false;
-  // The nearest twins first (ties by slot, so the order does not depend on the index's).
-  std::sort(pairs.begin(), pairs.end(), [](const LoopPair& x, const LoopPair& y) {
-    const double dx = (x.a - x.b).squaredNorm();
-    const double dy = (y.a - y.b).squaredNorm();
-    return dx != dy ? dx < dy : x.recent < y.recent;
-  });
-  if (pairs.size() > kMaxPairs) pairs.resize(kMaxPairs);
-  const std::uint64_t mask = consistent_pairs(pairs, in.config.reach);
-  // At least two pairs, and more than half of them: twins that disagree with the motion are
-  // evidence against it.
-  const auto agreeing = static_cast<std::size_t>(std::popcount(mask));
-  if (agreeing < 2 || 2 * agreeing <= pairs.size()) return false;
-  const RigidMotion motion = fit_rigid_motion(pairs, mask);
+  if (pairs.size() < 2 || !all_pairs_agree(pairs, in.config.reach)) return false;
+  // In slot order, so that the fit's sums do not depend on the index's layout (a loaded state
+  // rebuilds it).
+  std::sort(pairs.begin(), pairs.end(),
+            [](const LoopPair& x, const LoopPair& y) { return x.recent < y.recent; });
+  const RigidMotion motion = fit_rigid_motion(pairs);
   move_recent(in, motion, map, scratch.moved);
   const Eigen::Vector2d at = motion.apply({pose[0], pose[1]});
   pose = Pose(at[0], at[1], wrap_angle(pose[2] + motion.turn));

@@ -111,7 +111,8 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
     stored.log_odds = ex.initial;
     stored.id = in.scan_step * kObservationsPerScanLimit + j;
     stored.last_seen = step_now;
-    map.insert(stored, largest_variance(stored));
+    const memory::Slot slot = map.insert(stored, largest_variance(stored));
+    if (stored.log_odds >= ex.confirm_at) scratch.confirmed.push_back(slot);
     ++counts.created;
   }
 }

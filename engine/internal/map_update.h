@@ -37,7 +37,9 @@ struct MapUpdateScratch {
   std::vector<memory::Slot> touched;    // the chosen landmarks
   std::vector<std::uint32_t> observed;  // their observations
   std::vector<memory::SpatialEntry> in_view;
-  std::vector<memory::Slot> confirmed;  // the chosen landmarks whose log-odds reached confirm_at
+  // The landmarks the scan confirmed: chosen ones whose log-odds reached confirm_at, and new ones
+  // that start at or above it.
+  std::vector<memory::Slot> confirmed;
 };
 
 // What the map update reads besides the particle.

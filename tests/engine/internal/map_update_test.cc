@@ -172,6 +172,31 @@ TEST(MapUpdateTest, MatchesTheOracle) {
   expect_index_is_the_map(w.map);
 }
 
+// New landmarks that start at or above confirm_at are confirmed by their scan too.
+TEST(MapUpdateTest, NewLandmarksStartingConfirmedAreListed) {
+  World w;
+  w.in.existence.confirm_at = 0.7;  // the initial log-odds
+  MapUpdateScratch scratch;
+  MapUpdateCounts counts;
+  update_particle_map<true>(w.in, w.pose, w.scan, w.assignment, {}, {}, w.map, scratch, counts);
+  std::vector<memory::Slot> fresh;  // the three new landmarks, by their ids
+  for (const auto [slot, l] : w.map) {
+    if (l.id >= 33 * kObservationsPerScanLimit) fresh.push_back(slot);
+  }
+  ASSERT_EQ(fresh.size(), 3u);
+  for (const memory::Slot slot : fresh) {
+    EXPECT_NE(std::find(scratch.confirmed.begin(), scratch.confirmed.end(), slot),
+              scratch.confirmed.end())
+        << slot;
+  }
+  // Each chosen landmark listed crossed 0.7 in this scan.
+  for (const memory::Slot slot : scratch.confirmed) {
+    if (std::find(fresh.begin(), fresh.end(), slot) != fresh.end()) continue;
+    EXPECT_LT(w.oracle.at(slot).log_odds, 0.7);
+    EXPECT_GE(w.oracle.at(slot).log_odds + 0.5, 0.7);
+  }
+}
+
 TEST(MapUpdateTest, ReusedTermsGiveTheSameBits) {
   World a, b;
   std::vector<LandmarkObservation> terms;
