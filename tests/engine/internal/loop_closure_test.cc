@@ -129,6 +129,12 @@ TEST(LoopClosureTest, AgreementNeedsTwinsPreciseAgainstTheReach) {
   EXPECT_FALSE(pairs_agree(j, k, 10.0));
 }
 
+// The drift: recent = R(-turn) (old - shift); the closure must undo it.
+const double kTurn = 0.05;
+const Eigen::Vector2d kShift(4.0, -3.0);
+
+Eigen::Vector2d drifted(const Eigen::Vector2d& old) { return rotate(old - kShift, -kTurn); }
+
 // A particle's map: old landmarks at `olds` (last seen at step 0), and a recent copy of some of
 // them moved by the inverse of `drift` (seen at `now`), all confirmed.
 struct DriftedMap {
@@ -149,13 +155,12 @@ struct DriftedMap {
     memory::Landmark l{p[0], p[1], var, 0.3 * var, 2 * var, log_odds, 0, last_seen};
     return map.insert(l, largest_variance(l));
   }
+  // Old landmarks at `olds` and a recent drifted copy of each.
+  void add_twins(const std::vector<Eigen::Vector2d>& olds, double recent_log_odds = 3.0) {
+    for (const auto& p : olds) old_slots.push_back(add(p, 0));
+    for (const auto& p : olds) recent_slots.push_back(add(drifted(p), 4990, recent_log_odds));
+  }
 };
-
-// The drift: recent = R(-turn) (old - shift); the closure must undo it.
-const double kTurn = 0.05;
-const Eigen::Vector2d kShift(4.0, -3.0);
-
-Eigen::Vector2d drifted(const Eigen::Vector2d& old) { return rotate(old - kShift, -kTurn); }
 
 TEST(LoopClosureTest, MovesADriftedCopyOntoTheOldMap) {
   DriftedMap w;
@@ -230,8 +235,7 @@ TEST(LoopClosureTest, OneAgreeingPairIsNotEnough) {
 TEST(LoopClosureTest, TwoOldLandmarksWithinReachMakeNoPair) {
   DriftedMap w;
   const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}};
-  for (const auto& p : olds) w.old_slots.push_back(w.add(p, 0));
-  for (const auto& p : olds) w.recent_slots.push_back(w.add(drifted(p), 4990));
+  w.add_twins(olds);
   w.add(drifted(olds[0]) + Eigen::Vector2d(2.0, 7.0), 0);  // a second old one near a recent one
   expect_no_closure(w, {w.recent_slots[0]});
 }
@@ -239,8 +243,7 @@ TEST(LoopClosureTest, TwoOldLandmarksWithinReachMakeNoPair) {
 TEST(LoopClosureTest, TwoRecentLandmarksWithinReachOfTheOldOneMakeNoPair) {
   DriftedMap w;
   const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}};
-  for (const auto& p : olds) w.old_slots.push_back(w.add(p, 0));
-  for (const auto& p : olds) w.recent_slots.push_back(w.add(drifted(p), 4990));
+  w.add_twins(olds);
   w.add(olds[0] + Eigen::Vector2d(-6.0, 5.0), 4990);  // another recent one near the old one
   expect_no_closure(w, {w.recent_slots[1]});
 }
@@ -248,16 +251,14 @@ TEST(LoopClosureTest, TwoRecentLandmarksWithinReachOfTheOldOneMakeNoPair) {
 TEST(LoopClosureTest, AnyOtherConfirmedLandmarkWithinReachMakesNoPair) {
   DriftedMap w;
   const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}};
-  for (const auto& p : olds) w.old_slots.push_back(w.add(p, 0));
-  for (const auto& p : olds) w.recent_slots.push_back(w.add(drifted(p), 4990));
+  w.add_twins(olds);
   // A recent confirmed landmark 7.8 m from the first recent twin and 12.8 m from its old one,
   // with no twin of its own: in a map this dense a pair could be a neighbour's.
   w.add(drifted(olds[0]) + Eigen::Vector2d(-6.0, 5.0), 4990);
   expect_no_closure(w, {w.recent_slots[1]});
   // A provisional one there does not count.
   DriftedMap v;
-  for (const auto& p : olds) v.old_slots.push_back(v.add(p, 0));
-  for (const auto& p : olds) v.recent_slots.push_back(v.add(drifted(p), 4990));
+  v.add_twins(olds);
   v.add(drifted(olds[0]) + Eigen::Vector2d(-6.0, 5.0), 4990, 1.0);
   Pose pose(1.0, 2.0, 0.5);
   LoopClosureScratch scratch;
@@ -268,8 +269,7 @@ TEST(LoopClosureTest, ProvisionalYoungOrTwinsWithinTheirUncertaintyMakeNoPair) {
   {
     DriftedMap w;  // the recent copies are provisional
     const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}};
-    for (const auto& p : olds) w.old_slots.push_back(w.add(p, 0));
-    for (const auto& p : olds) w.recent_slots.push_back(w.add(drifted(p), 4990, 1.0));
+    w.add_twins(olds, 1.0);
     expect_no_closure(w, w.recent_slots);
   }
   {
@@ -300,8 +300,7 @@ TEST(LoopClosureTest, ATwinThatDisagreesMakesNoClosure) {
   expect_no_closure(w, {w.recent_slots[0]});
   // With the fourth one agreeing too, the loop closes.
   DriftedMap v;
-  for (const auto& p : olds) v.old_slots.push_back(v.add(p, 0));
-  for (const auto& p : olds) v.recent_slots.push_back(v.add(drifted(p), 4990));
+  v.add_twins(olds);
   Pose pose(1.0, 2.0, 0.5);
   LoopClosureScratch scratch;
   EXPECT_TRUE(close_loop(v.in, std::vector<memory::Slot>{v.recent_slots[0]}, v.map, pose, scratch));
@@ -310,8 +309,7 @@ TEST(LoopClosureTest, ATwinThatDisagreesMakesNoClosure) {
 TEST(LoopClosureTest, NoSearchBeyondTheLandmarksThisScanConfirmed) {
   DriftedMap w;
   const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}};
-  for (const auto& p : olds) w.old_slots.push_back(w.add(p, 0));
-  for (const auto& p : olds) w.recent_slots.push_back(w.add(drifted(p), 4990));
+  w.add_twins(olds);
   const memory::Slot fresh = w.add({-50, 50}, 5000);  // confirmed now, with no twin
   expect_no_closure(w, {fresh});
 }
