@@ -127,16 +127,19 @@ inline bool all_pairs_agree(std::span<const LoopPair> pairs, double reach) {
   return true;
 }
 
+// Whether `l` was last associated min_age steps ago or more (old), or never; else it is recent.
+inline bool old_enough(const LoopClosureInput& in, const memory::Landmark& l) {
+  return l.last_seen < 0 ||
+         in.scan_step - static_cast<std::uint64_t>(l.last_seen) >= in.config.min_age;
+}
+
 // Every landmark of `map` associated fewer than min_age steps ago moves by `motion` (mean, and
 // covariance rotated). `slots` is scratch. O(N) plus the moves' path copies.
 inline void move_recent(const LoopClosureInput& in, const RigidMotion& motion,
                         memory::ParticleMap& map, std::vector<memory::Slot>& slots) {
   slots.clear();
   for (const auto& e : map.tree()) {
-    const std::int64_t seen = e.landmark.last_seen;
-    if (seen >= 0 && in.scan_step - static_cast<std::uint64_t>(seen) < in.config.min_age) {
-      slots.push_back(e.slot);
-    }
+    if (!old_enough(in, e.landmark)) slots.push_back(e.slot);
   }
   const double c = std::cos(motion.turn);
   const double s = std::sin(motion.turn);
@@ -157,11 +160,6 @@ inline void move_recent(const LoopClosureInput& in, const RigidMotion& motion,
 }
 
 namespace loop_closure_detail {
-
-inline bool old_enough(const LoopClosureInput& in, const memory::Landmark& l) {
-  return l.last_seen < 0 ||
-         in.scan_step - static_cast<std::uint64_t>(l.last_seen) >= in.config.min_age;
-}
 
 // Appends (slot, its old twin) to `pairs` when exactly one old confirmed landmark lies within
 // reach of the landmark in `slot`; returns whether it did.
@@ -212,7 +210,7 @@ inline bool close_loop(const LoopClosureInput& in, std::span<const memory::Slot>
   map.index().within(pose[0], pose[1], in.range, [&](const memory::SpatialEntry& e) {
     if (std::find(confirmed.begin(), confirmed.end(), e.slot) != confirmed.end()) return;
     const memory::Landmark& l = tree.at(e.slot);
-    if (loop_closure_detail::old_enough(in, l) || !(l.log_odds >= in.confirm_at)) return;
+    if (old_enough(in, l) || !(l.log_odds >= in.confirm_at)) return;
     pair_with_twin(in, map, e.slot, pairs);
   });
   if (pairs.size() < 2 || !all_pairs_agree(pairs, in.config.reach)) return false;
