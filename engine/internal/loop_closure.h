@@ -11,18 +11,19 @@
 // motion keep their distances: when there are two pairs or more and every two agree within three
 // standard deviations of the landmarks' own (`pairs_agree`; a twin that disagrees is evidence
 // that they are not all twins), the least-squares rigid motion of the recent landmarks onto the
-// old ones (`fit_rigid_motion`) moves the particle's pose and every landmark associated within
-// min_age steps (`move_recent`). The twins then lie together: association takes one of each
-// and negative information removes the other. The particle's weight is not changed: this is a
+// old ones (`fit_rigid_motion`) moves the particle's pose and the landmarks within the sensor's
+// range associated within min_age steps (`move_recent`): the fit holds where its pairs are, and
+// a recent landmark farther back on the way carries the drift of an earlier pose, which a turn
+// about the pairs would swing by metres. The twins then lie together: association takes one of
+// each and negative information removes the other. The particle's weight is not changed: this is a
 // correction of its map, as a map join is, not a draw.
 //
 // The search starts from the landmarks this scan confirmed and goes on only when one of them has
 // a twin, so a scan with no loop in sight costs one or two disc queries of radius `reach` per
 // landmark it confirmed, each reading at most two landmarks. Thread safety: writes only the
 // particle's map; concurrent calls on distinct particles with distinct scratch are safe. Costs:
-// O(k^2) agreement tests for k pairs; on a closure, O(N) over the particle's map (the recent
-// landmarks are found by their last association, which the index does not hold) and the moved
-// landmarks' path copies.
+// O(k^2) agreement tests for k pairs; on a closure, one disc query of the sensor's range and the
+// moved landmarks' path copies.
 #pragma once
 
 #include <algorithm>
@@ -133,14 +134,18 @@ inline bool old_enough(const LoopClosureInput& in, const memory::Landmark& l) {
          in.scan_step - static_cast<std::uint64_t>(l.last_seen) >= in.config.min_age;
 }
 
-// Every landmark of `map` associated fewer than min_age steps ago moves by `motion` (mean, and
-// covariance rotated). `slots` is scratch. O(N) plus the moves' path copies.
+// Every landmark of `map` within the sensor's range of `at` and associated fewer than min_age
+// steps ago moves by `motion` (mean, and covariance rotated). `slots` is scratch. One disc query
+// plus the moves' path copies.
 inline void move_recent(const LoopClosureInput& in, const RigidMotion& motion,
-                        memory::ParticleMap& map, std::vector<memory::Slot>& slots) {
+                        const Eigen::Vector2d& at, memory::ParticleMap& map,
+                        std::vector<memory::Slot>& slots) {
   slots.clear();
-  for (const auto& e : map.tree()) {
-    if (!old_enough(in, e.landmark)) slots.push_back(e.slot);
-  }
+  const memory::LandmarkTree& tree = map.tree();
+  map.index().within(at[0], at[1], in.range, [&](const memory::SpatialEntry& e) {
+    if (!old_enough(in, tree.at(e.slot))) slots.push_back(e.slot);
+  });
+  std::sort(slots.begin(), slots.end());
   const double c = std::cos(motion.turn);
   const double s = std::sin(motion.turn);
   map.update_each(
@@ -219,7 +224,7 @@ inline bool close_loop(const LoopClosureInput& in, std::span<const memory::Slot>
   std::sort(pairs.begin(), pairs.end(),
             [](const LoopPair& x, const LoopPair& y) { return x.recent < y.recent; });
   const RigidMotion motion = fit_rigid_motion(pairs);
-  move_recent(in, motion, map, scratch.moved);
+  move_recent(in, motion, {pose[0], pose[1]}, map, scratch.moved);
   const Eigen::Vector2d at = motion.apply({pose[0], pose[1]});
   pose = Pose(at[0], at[1], wrap_angle(pose[2] + motion.turn));
   return true;

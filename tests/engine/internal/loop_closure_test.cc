@@ -167,9 +167,13 @@ TEST(LoopClosureTest, MovesADriftedCopyOntoTheOldMap) {
   const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}, {-5, 25}, {60, 60}};
   for (const auto& p : olds) w.old_slots.push_back(w.add(p, 0));
   for (int k = 0; k < 3; ++k) w.recent_slots.push_back(w.add(drifted(olds[k]), 4990));
-  // A recent landmark with no twin (seen on the way) moves with the pose too.
-  const memory::Slot lone = w.add({-40, -40}, 4995, 1.0);
+  // A recent landmark with no twin within the sensor's range moves with the pose too; one seen
+  // farther back on the way (beyond the range) keeps its place, since its drift is that of an
+  // earlier pose.
+  const memory::Slot lone = w.add({-15, -10}, 4995, 1.0);
   const memory::Landmark lone_before = w.map.tree().at(lone);
+  const memory::Slot far = w.add({-40, -40}, 4995, 1.0);
+  const memory::Landmark far_before = w.map.tree().at(far);
   const Pose truth(3.0, 2.0, 0.3);
   const Eigen::Vector2d seen = drifted({truth[0], truth[1]});
   Pose pose(seen[0], seen[1], truth[2] - kTurn);
@@ -201,6 +205,7 @@ TEST(LoopClosureTest, MovesADriftedCopyOntoTheOldMap) {
       rotate(Eigen::Vector2d(lone_before.x, lone_before.y), kTurn) + kShift;
   EXPECT_LT((Eigen::Vector2d(moved.x, moved.y) - want).norm(), 1e-9);
   EXPECT_EQ(moved.log_odds, lone_before.log_odds);
+  EXPECT_EQ(w.map.tree().at(far), far_before);
   // The index moved with the means: a disc at each old landmark finds its twin now.
   for (int k = 0; k < 3; ++k) {
     std::vector<memory::Slot> near;
