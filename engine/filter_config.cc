@@ -87,6 +87,10 @@ void validate(const FilterConfig& c) {
           "detection.clutter_density must be finite and >= 0");
   require(std::isfinite(c.loop_closure.reach) && c.loop_closure.reach >= 0,
           "loop_closure.reach must be finite and >= 0");
+  require(std::isfinite(c.loop_closure.separation) && c.loop_closure.separation >= 0,
+          "loop_closure.separation must be finite and >= 0");
+  require(c.loop_closure.max_turn > 0 && c.loop_closure.max_turn <= std::numbers::pi,
+          "loop_closure.max_turn must be in (0, pi] radians");
 }
 
 }  // namespace fastslam::engine

@@ -149,15 +149,20 @@ struct DetectionConfig {
 // the loop never closes (docs/association.md, "Loop closure"). When a landmark is confirmed,
 // the particle pairs its recent landmarks (confirmed, associated within `min_age` steps, within
 // the sensor's range) with its old ones (confirmed, not associated for `min_age` steps): two
-// pair when each is the other's only confirmed neighbour within `reach` metres, so maps denser
-// than the reach never pair. When there are two pairs or more and all agree on one rigid motion
-// (their distances within the pairs' uncertainty), the particle's pose and its recent landmarks
-// move by the least-squares motion onto the old ones; the twins then lie together, association
-// takes one of each and negative information removes the other. reach 0: off, and every run is
-// bit for bit what it was.
+// pair when each is the other's only confirmed neighbour within `separation` metres, or, when
+// they lie farther apart than that, within `reach`; maps denser than the separation never pair.
+// When there are two pairs or more, all agree on one rigid motion (their distances within the
+// pairs' uncertainty) and that motion turns by at most `max_turn`, the particle's pose and its
+// recent landmarks move by the least-squares motion onto the old ones; the twins then lie
+// together, association takes one of each and negative information removes the other. reach 0:
+// off, and every run is bit for bit what it was.
 struct LoopClosureConfig {
-  double reach = 10.0;           // m, >= 0: the largest drift a loop closes over
+  double reach = 15.0;           // m, >= 0: the largest drift a loop closes over
   std::uint64_t min_age = 2000;  // steps (controls and scans) that separate old from recent
+  // m, >= 0: twins at most this far apart must be alone within it, farther ones within `reach`
+  // (at least `reach` when larger or 0: one radius).
+  double separation = 10.0;
+  double max_turn = 0.2;  // rad, > 0: the largest heading drift a loop closes over
 };
 
 // EKF-SLAM (Algorithm::kEkf) with maximum-likelihood association: gates on the squared

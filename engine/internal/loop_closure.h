@@ -5,13 +5,17 @@
 // lies outside every particle's gate and is mapped a second time; the particle's recent map is
 // then a shifted and turned copy of part of its old map. Recent: confirmed, associated fewer
 // than min_age steps ago; old: confirmed, not associated for min_age steps. A recent landmark
-// and an old one pair when each is the other's only confirmed neighbour within `reach` (a pair
-// must not be a guess among neighbours, which also keeps maps denser than the reach from ever
-// pairing) and they lie farther apart than their own uncertainty. Pairs taken by one rigid
-// motion keep their distances: when there are two pairs or more and every two agree within three
-// standard deviations of the landmarks' own (`pairs_agree`; a twin that disagrees is evidence
-// that they are not all twins), the least-squares rigid motion of the recent landmarks onto the
-// old ones (`fit_rigid_motion`) moves the particle's pose and the landmarks within the sensor's
+// and an old one pair when each is the other's only confirmed neighbour within `separation`,
+// or within `reach` when they lie farther apart than the separation (a pair must not be a guess
+// among neighbours, which also keeps maps denser than the separation from ever pairing; the
+// wider disc lets a larger drift close where the map is sparse), and they lie farther apart
+// than their own uncertainty. Pairs taken by one rigid motion keep their distances: when there
+// are two pairs or more and every two agree within three standard deviations of the landmarks'
+// own (`pairs_agree`; a twin that disagrees is evidence that they are not all twins), the
+// least-squares rigid motion of the recent landmarks onto the old ones (`fit_rigid_motion`),
+// unless it turns by more than `max_turn` (two pairs agree by chance about one time in ten,
+// and such a motion turns by whatever angle their chance geometry gives), moves the particle's
+// pose and the landmarks within the sensor's
 // range associated within min_age steps (`move_recent`): the fit holds where its pairs are, and
 // a recent landmark farther back on the way carries the drift of an earlier pose, which a turn
 // about the pairs would swing by metres. The twins then lie together: association takes one of
@@ -19,11 +23,11 @@
 // correction of its map, as a map join is, not a draw.
 //
 // The search starts from the landmarks this scan confirmed and goes on only when one of them has
-// a twin, so a scan with no loop in sight costs one or two disc queries of radius `reach` per
-// landmark it confirmed, each reading at most two landmarks. Thread safety: writes only the
-// particle's map; concurrent calls on distinct particles with distinct scratch are safe. Costs:
-// O(k^2) agreement tests for k pairs; on a closure, one disc query of the sensor's range and the
-// moved landmarks' path copies.
+// a twin, so a scan with no loop in sight costs at most four disc queries (of the separation and
+// the reach) per landmark it confirmed, each reading at most two landmarks. Thread safety: writes
+// only the particle's map; concurrent calls on distinct particles with distinct scratch are safe.
+// Costs: O(k^2) agreement tests for k pairs; on a closure, one disc query of the sensor's range and
+// the moved landmarks' path copies.
 #pragma once
 
 #include <algorithm>
@@ -100,29 +104,36 @@ inline RigidMotion fit_rigid_motion(std::span<const LoopPair> pairs) {
   return m;
 }
 
-// The largest tolerance of the agreement test, as a share of the reach. Two unrelated pairs,
-// whose offsets spread over the reach, agree within a tolerance t with a chance of about
-// 0.6 t / reach: at this share about one in ten. Landmarks known only to metres (Victoria Park's
-// trees under a 1 m range noise: tolerances of 3-9 m against a 10 m reach) never pair.
+// The largest tolerance of the agreement test, as a share of the radius within which twins
+// must be alone (pair_radius). Two unrelated pairs, whose offsets spread over that radius, agree
+// within a tolerance t with a chance of about 0.6 t / radius: at this share about one in ten.
+// Landmarks known only to metres (Victoria Park's trees under a 1 m range noise: tolerances of
+// 3-9 m against a 10 m radius) never pair.
 inline constexpr double kAgreementShare = 0.15;
+
+// The radius within which twins must be each other's only confirmed neighbour when they lie
+// within it: the separation, or the reach when the separation is 0 or not below it.
+inline double pair_radius(const LoopClosureConfig& c) {
+  return c.separation > 0.0 && c.separation < c.reach ? c.separation : c.reach;
+}
 
 // Whether pairs j and k can be taken by one rigid motion: distinct landmarks, and the distance
 // between their recent landmarks within three standard deviations (from the four landmarks'
 // covariance traces) of the distance between their old ones, a tolerance itself at most
-// kAgreementShare of `reach`.
-inline bool pairs_agree(const LoopPair& j, const LoopPair& k, double reach) {
+// kAgreementShare of `radius` (pair_radius).
+inline bool pairs_agree(const LoopPair& j, const LoopPair& k, double radius) {
   if (j.old == k.old || j.recent == k.recent) return false;
   const double recent = (j.a - k.a).norm();
   const double old = (j.b - k.b).norm();
   const double tolerance = 3.0 * std::sqrt(j.variance + k.variance);
-  return tolerance <= kAgreementShare * reach && std::fabs(recent - old) <= tolerance;
+  return tolerance <= kAgreementShare * radius && std::fabs(recent - old) <= tolerance;
 }
 
 // Whether every two of the pairs agree (pairs_agree). O(k^2).
-inline bool all_pairs_agree(std::span<const LoopPair> pairs, double reach) {
+inline bool all_pairs_agree(std::span<const LoopPair> pairs, double radius) {
   for (std::size_t i = 0; i < pairs.size(); ++i) {
     for (std::size_t j = i + 1; j < pairs.size(); ++j) {
-      if (!pairs_agree(pairs[i], pairs[j], reach)) return false;
+      if (!pairs_agree(pairs[i], pairs[j], radius)) return false;
     }
   }
   return true;
@@ -166,30 +177,37 @@ inline void move_recent(const LoopClosureInput& in, const RigidMotion& motion,
 
 namespace loop_closure_detail {
 
-// Appends (slot, its old twin) to `pairs` when exactly one old confirmed landmark lies within
-// reach of the landmark in `slot`; returns whether it did.
+// Appends (slot, its old twin) to `pairs` when the landmark in `slot` and an old confirmed one
+// are each other's only confirmed neighbour within pair_radius, or, with none within it, within
+// the reach; returns whether it did.
 inline bool pair_with_twin(const LoopClosureInput& in, const memory::ParticleMap& map,
                            memory::Slot slot, std::vector<LoopPair>& pairs) {
   const memory::LandmarkTree& tree = map.tree();
-  // The one confirmed landmark within reach of `at` other than `self` (and false when there
-  // are none or several); stops reading landmarks once two are found.
-  const auto only_neighbour = [&](const memory::Landmark& at, memory::Slot self,
-                                  memory::Slot& found) {
+  // How many confirmed landmarks other than `self` lie within `radius` of `at`, counting to two
+  // (then it stops reading landmarks); `found` is the last one counted.
+  const auto neighbours = [&](const memory::Landmark& at, memory::Slot self, double radius,
+                              memory::Slot& found) {
     std::size_t n = 0;
-    map.index().within(at.x, at.y, in.config.reach, [&](const memory::SpatialEntry& e) {
+    map.index().within(at.x, at.y, radius, [&](const memory::SpatialEntry& e) {
       if (n > 1 || e.slot == self) return;
       if (!(tree.at(e.slot).log_odds >= in.confirm_at)) return;
       ++n;
       found = e.slot;
     });
-    return n == 1;
+    return n;
   };
   const memory::Landmark& l = tree.at(slot);
   memory::Slot twin = 0;
-  if (!only_neighbour(l, slot, twin)) return false;
+  double radius = pair_radius(in.config);
+  std::size_t n = neighbours(l, slot, radius, twin);
+  if (n == 0 && radius < in.config.reach) {
+    radius = in.config.reach;
+    n = neighbours(l, slot, radius, twin);
+  }
+  if (n != 1) return false;
   const memory::Landmark& o = tree.at(twin);
   memory::Slot back = 0;
-  if (!old_enough(in, o) || !only_neighbour(o, twin, back) || back != slot) return false;
+  if (!old_enough(in, o) || neighbours(o, twin, radius, back) != 1 || back != slot) return false;
   // Twins within their own uncertainty of each other are one landmark mapped twice, not a drift.
   const double variance = l.sxx + l.syy + o.sxx + o.syy;
   if ((Eigen::Vector2d(l.x, l.y) - Eigen::Vector2d(o.x, o.y)).squaredNorm() <= 9.0 * variance) {
@@ -218,12 +236,13 @@ inline bool close_loop(const LoopClosureInput& in, std::span<const memory::Slot>
     if (old_enough(in, l) || !(l.log_odds >= in.confirm_at)) return;
     pair_with_twin(in, map, e.slot, pairs);
   });
-  if (pairs.size() < 2 || !all_pairs_agree(pairs, in.config.reach)) return false;
+  if (pairs.size() < 2 || !all_pairs_agree(pairs, pair_radius(in.config))) return false;
   // In slot order, so that the fit's sums do not depend on the index's layout (a loaded state
   // rebuilds it).
   std::sort(pairs.begin(), pairs.end(),
             [](const LoopPair& x, const LoopPair& y) { return x.recent < y.recent; });
   const RigidMotion motion = fit_rigid_motion(pairs);
+  if (!(std::fabs(motion.turn) <= in.config.max_turn)) return false;
   move_recent(in, motion, {pose[0], pose[1]}, map, scratch.moved);
   const Eigen::Vector2d at = motion.apply({pose[0], pose[1]});
   pose = Pose(at[0], at[1], wrap_angle(pose[2] + motion.turn));

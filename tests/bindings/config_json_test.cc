@@ -72,6 +72,8 @@ void expect_same(const FilterConfig& a, const FilterConfig& b) {
   FASTSLAM_SAME_BITS(detection.clutter_density);
   FASTSLAM_SAME_BITS(loop_closure.reach);
   FASTSLAM_SAME(loop_closure.min_age);
+  FASTSLAM_SAME_BITS(loop_closure.separation);
+  FASTSLAM_SAME_BITS(loop_closure.max_turn);
 #undef FASTSLAM_SAME
 #undef FASTSLAM_SAME_BITS
 }
@@ -118,6 +120,8 @@ FilterConfig unusual_config() {
   c.detection.clutter_density = 1e-5 / 3;
   c.loop_closure.reach = 0.1 * 3;
   c.loop_closure.min_age = 18446744073709551615ULL;
+  c.loop_closure.separation = 0.7 * 3;
+  c.loop_closure.max_turn = std::nextafter(0.1, 1.0);
   return c;
 }
 
@@ -223,7 +227,9 @@ TEST(ConfigJson, WritesEveryKey) {
                                           "detection.probability",
                                           "detection.clutter_density",
                                           "loop_closure.reach",
-                                          "loop_closure.min_age"};
+                                          "loop_closure.min_age",
+                                          "loop_closure.separation",
+                                          "loop_closure.max_turn"};
   EXPECT_EQ(paths, expected);
 }
 

@@ -546,6 +546,15 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "recent landmarks to its old ones; 0: no loop closure (ml, das)")
       ->check(non_negative_number())
       ->capture_default_str();
+  cmd.add_option("--loop-closure-separation", f.loop_closure.separation,
+                 "metres: twins this close must be each other's only confirmed neighbour within "
+                 "it, farther ones within the reach (ml, das)")
+      ->check(non_negative_number())
+      ->capture_default_str();
+  cmd.add_option("--loop-closure-max-turn", f.loop_closure.max_turn,
+                 "radians: the largest heading drift a loop closes over (ml, das)")
+      ->check(number_in(1e-9, std::numbers::pi))
+      ->capture_default_str();
   cmd.add_option("--loop-closure-min-age", f.loop_closure.min_age,
                  "steps (controls and scans) without an association that make a landmark old "
                  "for loop closure (ml, das)")

@@ -91,6 +91,8 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"existence-range-margin", config.existence.range_margin},
       {"loop-closure-reach", config.loop_closure.reach},
       {"loop-closure-min-age", config.loop_closure.min_age},
+      {"loop-closure-separation", config.loop_closure.separation},
+      {"loop-closure-max-turn", config.loop_closure.max_turn},
       {"ekf-gate-accept", config.ekf.gate_accept},
       {"ekf-gate-new", config.ekf.gate_new},
       {"ekf-jcbb", config.ekf.joint_compatibility},

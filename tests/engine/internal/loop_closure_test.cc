@@ -319,5 +319,101 @@ TEST(LoopClosureTest, NoSearchBeyondTheLandmarksThisScanConfirmed) {
   expect_no_closure(w, {fresh});
 }
 
+TEST(LoopClosureTest, PairRadiusIsTheSeparationBelowTheReach) {
+  LoopClosureConfig c;
+  c.reach = 15.0;
+  c.separation = 10.0;
+  EXPECT_EQ(pair_radius(c), 10.0);
+  c.separation = 0.0;  // one radius
+  EXPECT_EQ(pair_radius(c), 15.0);
+  c.separation = 20.0;
+  EXPECT_EQ(pair_radius(c), 15.0);
+}
+
+// Twins about 12 m apart: beyond a 10 m separation, within a 15 m reach.
+const double kWideTurn = 0.02;
+const Eigen::Vector2d kWideShift(9.0, -8.0);
+
+Eigen::Vector2d wide_drifted(const Eigen::Vector2d& old) {
+  return rotate(old - kWideShift, -kWideTurn);
+}
+
+struct WideDrift : DriftedMap {
+  const std::vector<Eigen::Vector2d> olds = {{0, 0}, {45, 6}};
+  WideDrift() {
+    in.config.reach = 15.0;
+    in.config.separation = 10.0;
+    for (const auto& p : olds) old_slots.push_back(add(p, 0));
+    for (const auto& p : olds) recent_slots.push_back(add(wide_drifted(p), 4990));
+  }
+};
+
+TEST(LoopClosureTest, WideDriftsPairWhereTheMapIsSparse) {
+  WideDrift w;
+  for (std::size_t k = 0; k < 2; ++k) {
+    const memory::Landmark& r = w.map.tree().at(w.recent_slots[k]);
+    const double apart = (Eigen::Vector2d(r.x, r.y) - w.olds[k]).norm();
+    ASSERT_GT(apart, 10.0);
+    ASSERT_LT(apart, 15.0);
+  }
+  const Pose truth(20.0, 4.0, 0.1);
+  const Eigen::Vector2d seen = wide_drifted({truth[0], truth[1]});
+  Pose pose(seen[0], seen[1], truth[2] - kWideTurn);
+  LoopClosureScratch scratch;
+  ASSERT_TRUE(close_loop(w.in, std::vector<memory::Slot>{w.recent_slots[0]}, w.map, pose, scratch));
+  EXPECT_NEAR(pose[0], truth[0], 1e-9);
+  EXPECT_NEAR(pose[1], truth[1], 1e-9);
+  EXPECT_NEAR(pose[2], truth[2], 1e-12);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const memory::Landmark& r = w.map.tree().at(w.recent_slots[k]);
+    EXPECT_LT((Eigen::Vector2d(r.x, r.y) - w.olds[k]).norm(), 1e-9);
+  }
+  // With one radius of 10 m the twins are out of reach.
+  WideDrift v;
+  v.in.config.reach = 10.0;
+  expect_no_closure(v, {v.recent_slots[0]});
+}
+
+TEST(LoopClosureTest, ANeighbourWithinTheReachStopsAWidePair) {
+  WideDrift w;
+  // Confirmed, 13 m from the first recent twin: beyond the separation, within the reach.
+  const memory::Landmark& r = w.map.tree().at(w.recent_slots[0]);
+  w.add(Eigen::Vector2d(r.x, r.y) + Eigen::Vector2d(-5.0, 12.0), 4990);
+  expect_no_closure(w, {w.recent_slots[1]});
+}
+
+TEST(LoopClosureTest, TwinsWithinTheSeparationNeedBeAloneOnlyWithinIt) {
+  const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}};
+  // The drift's twins lie 5 m apart; a confirmed landmark 12 m from the first recent one.
+  const auto build = [&](DriftedMap& w, double separation) {
+    w.in.config.reach = 15.0;
+    w.in.config.separation = separation;
+    w.add_twins(olds);
+    w.add(drifted(olds[0]) + Eigen::Vector2d(-12.0, 0.0), 4990);
+  };
+  DriftedMap w;
+  build(w, 10.0);
+  Pose pose(1.0, 2.0, 0.5);
+  LoopClosureScratch scratch;
+  EXPECT_TRUE(close_loop(w.in, std::vector<memory::Slot>{w.recent_slots[1]}, w.map, pose, scratch));
+  DriftedMap v;  // one radius of 15 m: the neighbour makes the pair a guess
+  build(v, 0.0);
+  expect_no_closure(v, {v.recent_slots[1]});
+}
+
+TEST(LoopClosureTest, ATurnBeyondMaxTurnMakesNoClosure) {
+  const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}};
+  DriftedMap w;
+  w.in.config.max_turn = 0.9 * kTurn;
+  w.add_twins(olds);
+  expect_no_closure(w, {w.recent_slots[0]});
+  DriftedMap v;
+  v.in.config.max_turn = 1.1 * kTurn;
+  v.add_twins(olds);
+  Pose pose(1.0, 2.0, 0.5);
+  LoopClosureScratch scratch;
+  EXPECT_TRUE(close_loop(v.in, std::vector<memory::Slot>{v.recent_slots[0]}, v.map, pose, scratch));
+}
+
 }  // namespace
 }  // namespace fastslam::engine::internal
