@@ -15,12 +15,12 @@
 // least-squares rigid motion of the recent landmarks onto the old ones (`fit_rigid_motion`),
 // unless it turns by more than `max_turn` (two pairs agree by chance about one time in ten,
 // and such a motion turns by whatever angle their chance geometry gives), moves the particle's
-// pose and the landmarks within the sensor's
-// range associated within min_age steps (`move_recent`): the fit holds where its pairs are, and
-// a recent landmark farther back on the way carries the drift of an earlier pose, which a turn
-// about the pairs would swing by metres. The twins then lie together: association takes one of
-// each and negative information removes the other. The particle's weight is not changed: this is a
-// correction of its map, as a map join is, not a draw.
+// pose and the landmarks within the sensor's range associated within min_age steps
+// (`move_recent`): the fit holds where its pairs are, and a recent landmark farther back on the
+// way carries the drift of an earlier pose, which a turn about the pairs would swing by metres.
+// The twins then lie together: association takes one of each and negative information removes
+// the other. The particle's weight is not changed: this is a correction of its map, as a map
+// join is, not a draw.
 //
 // The search starts from the landmarks this scan confirmed and goes on only when one of them has
 // a twin, so a scan with no loop in sight costs at most four disc queries (of the separation and
