@@ -162,6 +162,19 @@ struct DriftedMap {
   }
 };
 
+// The closure from the pose `truth` seen under a drift (its map drifted the same way) puts the
+// pose back at the truth.
+void expect_pose_restored(DriftedMap& w, memory::Slot confirmed, const Pose& truth,
+                          Eigen::Vector2d (*drift)(const Eigen::Vector2d&), double turn) {
+  const Eigen::Vector2d seen = drift({truth[0], truth[1]});
+  Pose pose(seen[0], seen[1], truth[2] - turn);
+  LoopClosureScratch scratch;
+  ASSERT_TRUE(close_loop(w.in, std::vector<memory::Slot>{confirmed}, w.map, pose, scratch));
+  EXPECT_NEAR(pose[0], truth[0], 1e-9);
+  EXPECT_NEAR(pose[1], truth[1], 1e-9);
+  EXPECT_NEAR(pose[2], truth[2], 1e-12);
+}
+
 TEST(LoopClosureTest, MovesADriftedCopyOntoTheOldMap) {
   DriftedMap w;
   const std::vector<Eigen::Vector2d> olds = {{0, 0}, {22, 3}, {-5, 25}, {60, 60}};
@@ -174,14 +187,7 @@ TEST(LoopClosureTest, MovesADriftedCopyOntoTheOldMap) {
   const memory::Landmark lone_before = w.map.tree().at(lone);
   const memory::Slot far = w.add({-40, -40}, 4995, 1.0);
   const memory::Landmark far_before = w.map.tree().at(far);
-  const Pose truth(3.0, 2.0, 0.3);
-  const Eigen::Vector2d seen = drifted({truth[0], truth[1]});
-  Pose pose(seen[0], seen[1], truth[2] - kTurn);
-  LoopClosureScratch scratch;
-  ASSERT_TRUE(close_loop(w.in, std::vector<memory::Slot>{w.recent_slots[0]}, w.map, pose, scratch));
-  EXPECT_NEAR(pose[0], truth[0], 1e-9);
-  EXPECT_NEAR(pose[1], truth[1], 1e-9);
-  EXPECT_NEAR(pose[2], truth[2], 1e-12);
+  expect_pose_restored(w, w.recent_slots[0], Pose(3.0, 2.0, 0.3), drifted, kTurn);
   for (int k = 0; k < 3; ++k) {
     const memory::Landmark& r = w.map.tree().at(w.recent_slots[k]);
     EXPECT_LT((Eigen::Vector2d(r.x, r.y) - olds[k]).norm(), 1e-9);
@@ -356,14 +362,7 @@ TEST(LoopClosureTest, WideDriftsPairWhereTheMapIsSparse) {
     ASSERT_GT(apart, 10.0);
     ASSERT_LT(apart, 15.0);
   }
-  const Pose truth(20.0, 4.0, 0.1);
-  const Eigen::Vector2d seen = wide_drifted({truth[0], truth[1]});
-  Pose pose(seen[0], seen[1], truth[2] - kWideTurn);
-  LoopClosureScratch scratch;
-  ASSERT_TRUE(close_loop(w.in, std::vector<memory::Slot>{w.recent_slots[0]}, w.map, pose, scratch));
-  EXPECT_NEAR(pose[0], truth[0], 1e-9);
-  EXPECT_NEAR(pose[1], truth[1], 1e-9);
-  EXPECT_NEAR(pose[2], truth[2], 1e-12);
+  expect_pose_restored(w, w.recent_slots[0], Pose(20.0, 4.0, 0.1), wide_drifted, kWideTurn);
   for (std::size_t k = 0; k < 2; ++k) {
     const memory::Landmark& r = w.map.tree().at(w.recent_slots[k]);
     EXPECT_LT((Eigen::Vector2d(r.x, r.y) - w.olds[k]).norm(), 1e-9);
