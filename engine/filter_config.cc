@@ -91,6 +91,8 @@ void validate(const FilterConfig& c) {
           "loop_closure.separation must be finite and >= 0");
   require(c.loop_closure.max_turn > 0 && c.loop_closure.max_turn <= std::numbers::pi,
           "loop_closure.max_turn must be in (0, pi] radians");
+  require(std::isfinite(c.loop_closure.merge_gate) && c.loop_closure.merge_gate >= 0,
+          "loop_closure.merge_gate must be finite and >= 0");
 }
 
 }  // namespace fastslam::engine

@@ -163,6 +163,13 @@ struct LoopClosureConfig {
   // (at least `reach` when larger or 0: one radius).
   double separation = 10.0;
   double max_turn = 0.2;  // rad, > 0: the largest heading drift a loop closes over
+  // Squared Mahalanobis distance, >= 0 (0: never): two confirmed landmarks that are candidates of
+  // one observation, and whose means lie within this of each other under their two covariances,
+  // are one landmark mapped twice (twins that a closure brought together, or a landmark restarted
+  // beside itself), and the map update keeps one of them. Off by default: on the webmap it halves
+  // the false landmarks at no cost in pose, but on maps of distinct landmarks a metre or two apart
+  // it joins some (docs/association.md, "Twin merging"); 9.21 is chi-square's 99 % for 2 degrees.
+  double merge_gate = 0.0;
 };
 
 // EKF-SLAM (Algorithm::kEkf) with maximum-likelihood association: gates on the squared

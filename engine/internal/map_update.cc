@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
+
+#include <Eigen/LU>
 
 #include "engine/association.h"
 
@@ -80,6 +83,62 @@ void apply_negative_information(const MapUpdateInput& in, const Pose& pose,
   }
 }
 
+// Twins (filter_config.h LoopClosureConfig::merge_gate): a chosen landmark and another confirmed
+// candidate of its observation that no observation took, whose means lie within the gate of each
+// other under their two covariances (the test that two estimates are of one point; the sensor's
+// noise is left out, or a noisy sensor would join distinct landmarks a metre or two apart, as
+// Victoria Park's trees). The other goes; the chosen one keeps its slot and id (the scan's
+// report names them) and takes the larger log-odds and the better-known estimate after this
+// observation: its own as updated, or the other's updated now by the same observation, whichever
+// covariance has the smaller determinant (a restarted copy must not replace a landmark seen a
+// hundred times). In (observation, slot) order, so that the result does not depend on the order
+// of the index's leaves.
+void merge_twins(const MapUpdateInput& in, const Pose& pose,
+                 const std::vector<PlannedObservation>& scan,
+                 std::span<const std::int64_t> assignment,
+                 std::span<const AssociationCandidate> candidates, memory::ParticleMap& map,
+                 MapUpdateScratch& scratch, MapUpdateCounts& counts) {
+  std::vector<std::pair<std::uint32_t, memory::Slot>>& twins = scratch.twins;
+  twins.clear();
+  for (const AssociationCandidate& c : candidates) {
+    const std::int64_t chosen = assignment[c.observation];
+    if (chosen == kNewLandmark || chosen == static_cast<std::int64_t>(c.slot)) continue;
+    if (std::find(assignment.begin(), assignment.end(), static_cast<std::int64_t>(c.slot)) !=
+        assignment.end()) {
+      continue;  // another observation's landmark: not the same one
+    }
+    twins.emplace_back(c.observation, c.slot);
+  }
+  if (twins.empty()) return;
+  std::sort(twins.begin(), twins.end());
+  const double confirm_at = in.existence.confirm_at;
+  for (const auto& [j, slot] : twins) {
+    const auto keep = static_cast<memory::Slot>(assignment[j]);
+    const memory::Landmark* mine = map.find(keep);
+    const memory::Landmark* other = map.find(slot);
+    if (mine == nullptr || other == nullptr) continue;  // erased by an earlier merge
+    if (!(mine->log_odds >= confirm_at) || !(other->log_odds >= confirm_at)) continue;
+    const LandmarkGaussian a = to_gaussian(*mine);
+    const LandmarkGaussian b = to_gaussian(*other);
+    const Eigen::Vector2d d = a.mean - b.mean;
+    if (!(d.dot((a.cov + b.cov).inverse() * d) <= in.merge_gate)) continue;
+    LandmarkGaussian theirs = b;
+    apply_update(theirs, evaluate_observation(*in.sensor, theirs, pose, scan[j].z, in.r), in.r);
+    const bool take_theirs = theirs.cov.determinant() < a.cov.determinant();
+    const double log_odds = std::max(mine->log_odds, other->log_odds);
+    map.erase(slot);
+    map.update(
+        keep,
+        [&](memory::Landmark& stored) {
+          if (take_theirs) store_gaussian(theirs, stored);
+          stored.log_odds = log_odds;
+        },
+        largest_variance);
+    std::erase(scratch.confirmed, slot);
+    ++counts.removed;
+  }
+}
+
 }  // namespace
 
 float largest_variance(const memory::Landmark& l) {
@@ -96,9 +155,13 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          std::span<const std::int64_t> assignment,
                          std::span<const LandmarkObservation> terms,
                          std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
-                         MapUpdateScratch& scratch, MapUpdateCounts& counts) {
+                         MapUpdateScratch& scratch, MapUpdateCounts& counts,
+                         std::span<const AssociationCandidate> candidates) {
   update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, scratch.touched,
                       scratch.observed, scratch.confirmed);
+  if (in.merge_gate > 0.0) {
+    merge_twins(in, pose, scan, assignment, candidates, map, scratch, counts);
+  }
   const ExistenceConfig& ex = in.existence;
   if (ex.negative_information && in.max_range > ex.range_margin) {
     apply_negative_information(in, pose, map, scratch, counts);
@@ -122,12 +185,14 @@ template void update_particle_map<false>(const MapUpdateInput&, const Pose&,
                                          std::span<const std::int64_t>,
                                          std::span<const LandmarkObservation>,
                                          std::span<const std::uint32_t>, memory::ParticleMap&,
-                                         MapUpdateScratch&, MapUpdateCounts&);
+                                         MapUpdateScratch&, MapUpdateCounts&,
+                                         std::span<const AssociationCandidate>);
 template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
                                         const std::vector<PlannedObservation>&,
                                         std::span<const std::int64_t>,
                                         std::span<const LandmarkObservation>,
                                         std::span<const std::uint32_t>, memory::ParticleMap&,
-                                        MapUpdateScratch&, MapUpdateCounts&);
+                                        MapUpdateScratch&, MapUpdateCounts&,
+                                        std::span<const AssociationCandidate>);
 
 }  // namespace fastslam::engine::internal

@@ -13,10 +13,12 @@
 
 #include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "engine/association.h"
 #include "engine/filter_config.h"
 #include "engine/internal/scan_plan.h"
 #include "engine/landmark_ekf.h"
@@ -40,6 +42,7 @@ struct MapUpdateScratch {
   // The landmarks the scan confirmed: chosen ones whose log-odds reached confirm_at, and new ones
   // that start at or above it.
   std::vector<memory::Slot> confirmed;
+  std::vector<std::pair<std::uint32_t, memory::Slot>> twins;  // (observation, slot) to test
 };
 
 // What the map update reads besides the particle.
@@ -50,9 +53,10 @@ struct MapUpdateInput {
   double max_range = 0.0;
   double field_of_view = 0.0;
   std::uint64_t scan_step = 0;
+  double merge_gate = 0.0;  // LoopClosureConfig::merge_gate; 0: twins are never merged
 };
 
-// Landmarks the update started and removed.
+// Landmarks the update started and removed (by negative information, or merged into a twin).
 struct MapUpdateCounts {
   std::uint64_t created = 0;
   std::uint64_t removed = 0;
@@ -67,21 +71,20 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
                          std::span<const std::int64_t> assignment,
                          std::span<const LandmarkObservation> terms,
                          std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
-                         MapUpdateScratch& scratch, MapUpdateCounts& counts);
+                         MapUpdateScratch& scratch, MapUpdateCounts& counts,
+                         std::span<const AssociationCandidate> candidates = {});
 
-extern template void update_particle_map<false>(const MapUpdateInput&, const Pose&,
-                                                const std::vector<PlannedObservation>&,
-                                                std::span<const std::int64_t>,
-                                                std::span<const LandmarkObservation>,
-                                                std::span<const std::uint32_t>,
-                                                memory::ParticleMap&, MapUpdateScratch&,
-                                                MapUpdateCounts&);
+extern template void update_particle_map<false>(
+    const MapUpdateInput&, const Pose&, const std::vector<PlannedObservation>&,
+    std::span<const std::int64_t>, std::span<const LandmarkObservation>,
+    std::span<const std::uint32_t>, memory::ParticleMap&, MapUpdateScratch&, MapUpdateCounts&,
+    std::span<const AssociationCandidate>);
 extern template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
                                                const std::vector<PlannedObservation>&,
                                                std::span<const std::int64_t>,
                                                std::span<const LandmarkObservation>,
-                                               std::span<const std::uint32_t>,
-                                               memory::ParticleMap&, MapUpdateScratch&,
-                                               MapUpdateCounts&);
+                                               std::span<const std::uint32_t>, memory::ParticleMap&,
+                                               MapUpdateScratch&, MapUpdateCounts&,
+                                               std::span<const AssociationCandidate>);
 
 }  // namespace fastslam::engine::internal

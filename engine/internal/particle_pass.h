@@ -40,6 +40,9 @@ struct PassScratch {
   std::vector<std::int64_t> assignment;     // observation j: a slot or kNewLandmark
   std::vector<std::uint32_t> chosen_terms;  // 1.0: observation j's terms in search.terms
   std::vector<memory::Slot> taken;          // DAS scratch
+  // 1.0 ML: every candidate of a scan where an observation has two or more, before the lazy
+  // choice keeps only the chosen pairs (the map update's twin merge reads them).
+  std::vector<AssociationCandidate> rivals;
   MapUpdateScratch map;
   LoopClosureScratch loop;
 };
@@ -104,7 +107,13 @@ class ParticlePass final : public Pass {
     in.search.log_p0 = c.log_new_landmark;
     in.search.variance_bound = s_.landmark_variance_bound;
     in.search.bearings = bearings_;
-    in.map = {&s_.sensor, s_.r, c.existence, c.sensor.max_range, c.sensor.field_of_view, scan_step};
+    in.map = {&s_.sensor,
+              s_.r,
+              c.existence,
+              c.sensor.max_range,
+              c.sensor.field_of_view,
+              scan_step,
+              c.loop_closure.merge_gate};
     in.loop = {c.loop_closure, c.existence.confirm_at, c.sensor.max_range, scan_step};
     in.scan_step = scan_step;
     in.record = c.record_trajectory && !s_.pending.empty();
@@ -213,9 +222,11 @@ class ParticlePass final : public Pass {
       const Clock::time_point chosen = Clock::now();
       associate_seconds += seconds_between(mark, chosen);
       const Pose pose(s_.store.x()[i], s_.store.y()[i], s_.store.theta()[i]);
-      update_particle_map<kFs2>(in.map, pose, scan, scratch.assignment, scratch.search.terms,
-                                scratch.chosen_terms, s_.store.map(i),
-                                scratch.map, counts);
+      update_particle_map<kFs2>(
+          in.map, pose, scan, scratch.assignment, scratch.search.terms, scratch.chosen_terms,
+          s_.store.map(i), scratch.map, counts,
+          kMl && !kFs2 ? std::span<const AssociationCandidate>(scratch.rivals)
+                       : std::span<const AssociationCandidate>(scratch.search.candidates));
       if (in.loop.config.reach > 0.0 && !scratch.map.confirmed.empty()) {
         Pose moved = pose;
         if (close_loop(in.loop, scratch.map.confirmed, s_.store.map(i), moved, scratch.loop)) {
@@ -251,6 +262,11 @@ class ParticlePass final : public Pass {
     const std::span<const double> unassociated(log_unassociated_);
     double log_w;
     if constexpr (kMl && !kFs2) {  // the candidates carry bounds, evaluated as needed
+      scratch.rivals.clear();
+      if (std::any_of(scratch.search.counts.begin(), scratch.search.counts.end(),
+                      [](std::uint32_t n) { return n > 1; })) {
+        scratch.rivals = scratch.search.candidates;
+      }
       log_w = detection_model_ ? choose_maximum_likelihood<N>(in.search, prior, map, scan,
                                                               scratch.search, unassociated, chosen)
                                : choose_maximum_likelihood<N>(in.search, prior, map, scan,

@@ -74,6 +74,7 @@ void expect_same(const FilterConfig& a, const FilterConfig& b) {
   FASTSLAM_SAME(loop_closure.min_age);
   FASTSLAM_SAME_BITS(loop_closure.separation);
   FASTSLAM_SAME_BITS(loop_closure.max_turn);
+  FASTSLAM_SAME_BITS(loop_closure.merge_gate);
 #undef FASTSLAM_SAME
 #undef FASTSLAM_SAME_BITS
 }
@@ -122,6 +123,7 @@ FilterConfig unusual_config() {
   c.loop_closure.min_age = 18446744073709551615ULL;
   c.loop_closure.separation = 0.7 * 3;
   c.loop_closure.max_turn = std::nextafter(0.1, 1.0);
+  c.loop_closure.merge_gate = 0.3 * 7;
   return c;
 }
 
@@ -229,7 +231,8 @@ TEST(ConfigJson, WritesEveryKey) {
                                           "loop_closure.reach",
                                           "loop_closure.min_age",
                                           "loop_closure.separation",
-                                          "loop_closure.max_turn"};
+                                          "loop_closure.max_turn",
+                                          "loop_closure.merge_gate"};
   EXPECT_EQ(paths, expected);
 }
 

@@ -555,6 +555,11 @@ void add_association_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
                  "radians: the largest heading drift a loop closes over (ml, das)")
       ->check(number_in(1e-9, std::numbers::pi))
       ->capture_default_str();
+  cmd.add_option("--loop-closure-merge-gate", f.loop_closure.merge_gate,
+                 "squared Mahalanobis distance (their two covariances) within which two confirmed "
+                 "landmarks that are candidates of one observation merge; 0: never (ml, das)")
+      ->check(non_negative_number())
+      ->capture_default_str();
   cmd.add_option("--loop-closure-min-age", f.loop_closure.min_age,
                  "steps (controls and scans) without an association that make a landmark old "
                  "for loop closure (ml, das)")

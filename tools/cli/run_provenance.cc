@@ -93,6 +93,7 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       {"loop-closure-min-age", config.loop_closure.min_age},
       {"loop-closure-separation", config.loop_closure.separation},
       {"loop-closure-max-turn", config.loop_closure.max_turn},
+      {"loop-closure-merge-gate", config.loop_closure.merge_gate},
       {"ekf-gate-accept", config.ekf.gate_accept},
       {"ekf-gate-new", config.ekf.gate_new},
       {"ekf-jcbb", config.ekf.joint_compatibility},

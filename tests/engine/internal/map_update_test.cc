@@ -222,6 +222,152 @@ TEST(MapUpdateTest, ReusedTermsGiveTheSameBits) {
   }
 }
 
+// Twin merging (LoopClosureConfig::merge_gate). One observation is taken by landmark C; landmark O,
+// another candidate of that observation, lies at `offset` from C's updated mean. The oracle:
+// C updated by the scalar EKF; the squared distance under C's and O's covariances; the
+// better-known of C updated and O updated by the same observation kept in C's slot.
+struct TwinWorld {
+  memory::PoolHeap heap;
+  memory::ParticleMap map{heap, memory::Indexing::kSpatial};
+  RangeBearingModel sensor{SensorOffset{0.3, 0.0, 0.1}};
+  MapUpdateInput in;
+  Pose pose{2.0, 1.0, 0.4};
+  std::vector<PlannedObservation> scan;
+  std::vector<std::int64_t> assignment;
+  std::vector<AssociationCandidate> candidates;
+  memory::Landmark chosen{9.0, 4.0, 0.02, 0.004, 0.03, 3.0, 900 << 20, 17};
+  memory::Landmark other{0, 0, 0.002, -0.0005, 0.001, 2.5, 40 << 20, 4};
+  memory::Slot c = 0, o = 0;
+  LandmarkGaussian c_updated;  // the oracle's C after the observation
+
+  TwinWorld() {
+    in.sensor = &sensor;
+    in.r << 0.01, 0, 0, 0.0004;
+    in.existence.confirm_at = 2.0;
+    in.max_range = 30.0;
+    in.field_of_view = 3.0;
+    in.scan_step = 1000;
+    in.merge_gate = 9.21;
+    PlannedObservation z;
+    z.z = sensor.predict({chosen.x + 0.03, chosen.y - 0.02}, pose);
+    scan.push_back(z);
+    c_updated = to_gaussian(chosen);
+    update_landmark(sensor, c_updated, pose, z.z, in.r);
+  }
+  // The squared distance of O at c_updated.mean + offset, as the merge must compute it.
+  double distance2(const Eigen::Vector2d& offset) const {
+    const Eigen::Matrix2d spread = c_updated.cov + to_gaussian(other).cov;
+    return offset.dot(spread.inverse() * offset);
+  }
+  // Places O, then runs the update with the observation taken by C and O its other candidate.
+  void run(const Eigen::Vector2d& offset, MapUpdateCounts& counts) {
+    other.x = c_updated.mean[0] + offset[0];
+    other.y = c_updated.mean[1] + offset[1];
+    c = map.insert(chosen, largest_variance(chosen));
+    o = map.insert(other, largest_variance(other));
+    if (assignment.empty()) assignment.push_back(c);
+    candidates = {{0, o, -3.0, 0, 1.0f}, {0, c, -2.0, 0, 0.5f}};
+    MapUpdateScratch scratch;
+    update_particle_map<true>(in, pose, scan, assignment, {}, {}, map, scratch, counts, candidates);
+  }
+};
+
+TEST(MapUpdateTest, ATwinWithinTheGateGoesAndTheBetterKnownEstimateStays) {
+  TwinWorld w;
+  const Eigen::Vector2d offset(0.05, 0.02);
+  ASSERT_LT(w.distance2(offset), w.in.merge_gate);
+  MapUpdateCounts counts;
+  w.run(offset, counts);
+  EXPECT_EQ(w.map.find(w.o), nullptr);
+  ASSERT_NE(w.map.find(w.c), nullptr);
+  EXPECT_EQ(counts.removed, 1u);
+  // O (covariance determinant ~2e-6) is better known than C (~6e-4): its estimate, updated by
+  // the observation, goes to C's slot, which keeps C's id and takes C's larger log-odds.
+  LandmarkGaussian want = to_gaussian(w.other);
+  update_landmark(w.sensor, want, w.pose, w.scan[0].z, w.in.r);
+  const memory::Landmark& got = w.map.at(w.c);
+  EXPECT_NEAR(got.x, want.mean[0], 1e-12);
+  EXPECT_NEAR(got.y, want.mean[1], 1e-12);
+  EXPECT_NEAR(got.sxx, want.cov(0, 0), 1e-15);
+  EXPECT_NEAR(got.sxy, want.cov(0, 1), 1e-15);
+  EXPECT_NEAR(got.syy, want.cov(1, 1), 1e-15);
+  EXPECT_EQ(got.id, w.chosen.id);
+  EXPECT_EQ(got.log_odds, w.chosen.log_odds + w.in.existence.seen);
+  EXPECT_EQ(got.last_seen, 1000);
+  expect_index_is_the_map(w.map);
+}
+
+TEST(MapUpdateTest, TheChosenEstimateStaysWhenItIsTheBetterKnown) {
+  TwinWorld w;
+  w.other.sxx = 0.2;  // O far less certain than C
+  w.other.sxy = 0.0;
+  w.other.syy = 0.3;
+  w.other.log_odds = 6.0;
+  const Eigen::Vector2d offset(-0.1, 0.2);
+  ASSERT_LT(w.distance2(offset), w.in.merge_gate);
+  MapUpdateCounts counts;
+  w.run(offset, counts);
+  EXPECT_EQ(w.map.find(w.o), nullptr);
+  const memory::Landmark& got = w.map.at(w.c);
+  EXPECT_NEAR(got.x, w.c_updated.mean[0], 1e-12);
+  EXPECT_NEAR(got.syy, w.c_updated.cov(1, 1), 1e-15);
+  EXPECT_EQ(got.id, w.chosen.id);
+  EXPECT_EQ(got.log_odds, 6.0);  // the other's, the larger
+  expect_index_is_the_map(w.map);
+}
+
+TEST(MapUpdateTest, TheMergeGateIsTheSpreadOfBoth) {
+  for (const double angle : {0.0, 0.7, 1.9, 3.0, 4.4}) {
+    const Eigen::Vector2d u(std::cos(angle), std::sin(angle));
+    TwinWorld probe;
+    const double at_gate = std::sqrt(probe.in.merge_gate / probe.distance2(u));
+    for (const double f : {0.98, 1.02}) {
+      TwinWorld w;
+      MapUpdateCounts counts;
+      w.run(f * at_gate * u, counts);
+      EXPECT_EQ(w.map.find(w.o) == nullptr, f < 1.0) << angle << " " << f;
+    }
+  }
+}
+
+TEST(MapUpdateTest, OnlyConfirmedTwinsThatNoOtherObservationTookMerge) {
+  const Eigen::Vector2d offset(0.05, 0.02);
+  {
+    TwinWorld w;  // O provisional
+    w.other.log_odds = 1.5;
+    MapUpdateCounts counts;
+    w.run(offset, counts);
+    EXPECT_NE(w.map.find(w.o), nullptr);
+  }
+  {
+    TwinWorld w;  // C provisional (confirmed only from this scan on)
+    w.chosen.log_odds = 0.5;
+    MapUpdateCounts counts;
+    w.run(offset, counts);
+    EXPECT_NE(w.map.find(w.o), nullptr);
+  }
+  {
+    TwinWorld w;  // merging off
+    w.in.merge_gate = 0.0;
+    MapUpdateCounts counts;
+    w.run(offset, counts);
+    EXPECT_NE(w.map.find(w.o), nullptr);
+  }
+  {
+    TwinWorld w;  // O taken by a second observation: two landmarks, as far as this scan knows
+    PlannedObservation z;
+    z.z = w.sensor.predict({w.c_updated.mean[0] + 0.05, w.c_updated.mean[1] + 0.02}, w.pose);
+    w.scan.push_back(z);
+    w.assignment = {0, 1};  // the slots the two inserts below get
+    MapUpdateCounts counts;
+    w.run(offset, counts);
+    ASSERT_EQ(w.assignment[0], static_cast<std::int64_t>(w.c));
+    ASSERT_EQ(w.assignment[1], static_cast<std::int64_t>(w.o));
+    EXPECT_NE(w.map.find(w.o), nullptr);
+    EXPECT_NE(w.map.find(w.c), nullptr);
+  }
+}
+
 TEST(MapUpdateTest, AMapRebuiltFromItsTreeIndexesEverySlot) {
   World w;
   const memory::ParticleMap rebuilt(w.map.tree(), memory::Indexing::kSpatial, largest_variance);
