@@ -1,14 +1,16 @@
 // The map update of unknown association, for one particle after its scan's association: the
 // chosen landmarks get their EKF update at the particle's (drawn) pose and their index entries
-// move with their means; every landmark in the sensor's footprint that was not chosen loses
-// existence log-odds and is removed below the bound (negative information, eq. 73-75); then the
-// new landmarks enter the map and the index, with ids (scan step) * 2^20 + (observation index).
-// The particle's memory::ParticleMap keeps its tree and spatial index in step; an index entry's
-// extent is its landmark's largest covariance eigenvalue, `largest_variance`.
+// move with their means; with LoopClosureConfig::merge_gate, a confirmed twin of a chosen landmark
+// (another candidate of its observation, within the gate of it) is merged into it; every landmark
+// in the sensor's footprint that was not chosen loses existence log-odds and is removed below the
+// bound (negative information, eq. 73-75); then the new landmarks enter the map and the index,
+// with ids (scan step) * 2^20 + (observation index). The particle's memory::ParticleMap keeps its
+// tree and spatial index in step; an index entry's extent is its landmark's largest covariance
+// eigenvalue, `largest_variance`.
 // Thread safety: writes only the particle's map; concurrent calls on distinct
 // particles with distinct scratch are safe. Costs: O((Z + k) log N) for Z observations and k
-// landmarks in view, plus O(k log k) to order them; no allocation once the scratch has grown,
-// beyond the maps' path copies.
+// landmarks in view, plus O(k log k) to order them, and O(c Z) for c candidates to find twins; no
+// allocation once the scratch has grown, beyond the maps' path copies.
 #pragma once
 
 #include <cstdint>
