@@ -40,8 +40,8 @@ struct PassScratch {
   std::vector<std::int64_t> assignment;     // observation j: a slot or kNewLandmark
   std::vector<std::uint32_t> chosen_terms;  // 1.0: observation j's terms in search.terms
   std::vector<memory::Slot> taken;          // DAS scratch
-  // 1.0 ML: every candidate of a scan where an observation has two or more, before the lazy
-  // choice keeps only the chosen pairs (the map update's twin merge reads them).
+  // 1.0 ML with twin merging: every candidate of a scan where an observation has two or more,
+  // before the lazy choice keeps only the chosen pairs (the map update reads them).
   std::vector<AssociationCandidate> rivals;
   MapUpdateScratch map;
   LoopClosureScratch loop;
@@ -263,7 +263,8 @@ class ParticlePass final : public Pass {
     double log_w;
     if constexpr (kMl && !kFs2) {  // the candidates carry bounds, evaluated as needed
       scratch.rivals.clear();
-      if (std::any_of(scratch.search.counts.begin(), scratch.search.counts.end(),
+      if (in.map.merge_gate > 0.0 &&
+          std::any_of(scratch.search.counts.begin(), scratch.search.counts.end(),
                       [](std::uint32_t n) { return n > 1; })) {
         scratch.rivals = scratch.search.candidates;
       }
