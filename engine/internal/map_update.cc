@@ -52,25 +52,40 @@ void update_chosen(const MapUpdateInput& in, const Pose& pose,
       largest_variance);
 }
 
-// Negative information: the landmarks in the footprint and not touched lose `missed` log-odds
-// and are removed below the bound, in slot order (independent of the index's leaf order).
-void apply_negative_information(const MapUpdateInput& in, const Pose& pose,
-                                memory::ParticleMap& map, MapUpdateScratch& scratch,
-                                MapUpdateCounts& counts) {
-  const ExistenceConfig& ex = in.existence;
+// The landmarks in the footprint that the scan did not touch, into scratch.in_view in slot order
+// (independent of the index's leaf order).
+void collect_in_view(const MapUpdateInput& in, const Pose& pose, const memory::ParticleMap& map,
+                     MapUpdateScratch& scratch) {
   const Eigen::Vector2d at = in.sensor->sensor_position(pose);
   scratch.in_view.clear();
   map.index().in_footprint(at[0], at[1], pose[2] + in.sensor->offset().yaw,
-                     in.max_range - ex.range_margin, in.field_of_view,
-                     [&](const memory::SpatialEntry& e) {
-                       if (std::find(scratch.touched.begin(), scratch.touched.end(), e.slot) ==
-                           scratch.touched.end()) {
-                         scratch.in_view.push_back(e);
-                       }
-                     });
+                           in.max_range - in.existence.range_margin, in.field_of_view,
+                           [&](const memory::SpatialEntry& e) {
+                             if (std::find(scratch.touched.begin(), scratch.touched.end(),
+                                           e.slot) == scratch.touched.end()) {
+                               scratch.in_view.push_back(e);
+                             }
+                           });
   std::sort(
       scratch.in_view.begin(), scratch.in_view.end(),
       [](const memory::SpatialEntry& a, const memory::SpatialEntry& b) { return a.slot < b.slot; });
+}
+
+// The confirmed landmarks of scratch.in_view, before negative information lowers them.
+std::size_t count_confirmed(const MapUpdateInput& in, const memory::ParticleMap& map,
+                            const MapUpdateScratch& scratch) {
+  std::size_t n = 0;
+  for (const memory::SpatialEntry& e : scratch.in_view) {
+    if (map.at(e.slot).log_odds >= in.existence.confirm_at) ++n;
+  }
+  return n;
+}
+
+// Negative information: the landmarks of scratch.in_view lose `missed` log-odds and are removed
+// below the bound, in slot order.
+void apply_negative_information(const MapUpdateInput& in, memory::ParticleMap& map,
+                                const MapUpdateScratch& scratch, MapUpdateCounts& counts) {
+  const ExistenceConfig& ex = in.existence;
   for (const memory::SpatialEntry& e : scratch.in_view) {
     const double log_odds = map.at(e.slot).log_odds - ex.missed;
     if (log_odds < ex.remove_below) {
@@ -150,21 +165,27 @@ float largest_variance(const memory::Landmark& l) {
 }
 
 template <bool kFs2>
-void update_particle_map(const MapUpdateInput& in, const Pose& pose,
-                         const std::vector<PlannedObservation>& scan,
-                         std::span<const std::int64_t> assignment,
-                         std::span<const LandmarkObservation> terms,
-                         std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
-                         MapUpdateScratch& scratch, MapUpdateCounts& counts,
-                         std::span<const AssociationCandidate> candidates) {
+double update_particle_map(const MapUpdateInput& in, const Pose& pose,
+                           const std::vector<PlannedObservation>& scan,
+                           std::span<const std::int64_t> assignment,
+                           std::span<const LandmarkObservation> terms,
+                           std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
+                           MapUpdateScratch& scratch, MapUpdateCounts& counts,
+                           std::span<const AssociationCandidate> candidates) {
   update_chosen<kFs2>(in, pose, scan, assignment, terms, chosen_terms, map, scratch.touched,
                       scratch.observed, scratch.confirmed);
   if (in.merge_gate > 0.0) {
     merge_twins(in, pose, scan, assignment, candidates, map, scratch, counts);
   }
   const ExistenceConfig& ex = in.existence;
-  if (ex.negative_information && in.max_range > ex.range_margin) {
-    apply_negative_information(in, pose, map, scratch, counts);
+  const bool negative = ex.negative_information;
+  double log_weight = 0.0;
+  if ((negative || in.log_missed != 0.0) && in.max_range > ex.range_margin) {
+    collect_in_view(in, pose, map, scratch);
+    if (in.log_missed != 0.0) {
+      log_weight = static_cast<double>(count_confirmed(in, map, scratch)) * in.log_missed;
+    }
+    if (negative) apply_negative_information(in, map, scratch, counts);
   }
   const auto step_now = static_cast<std::int64_t>(in.scan_step);
   for (std::size_t j = 0; j < scan.size(); ++j) {
@@ -178,21 +199,22 @@ void update_particle_map(const MapUpdateInput& in, const Pose& pose,
     if (stored.log_odds >= ex.confirm_at) scratch.confirmed.push_back(slot);
     ++counts.created;
   }
+  return log_weight;
 }
 
-template void update_particle_map<false>(const MapUpdateInput&, const Pose&,
-                                         const std::vector<PlannedObservation>&,
-                                         std::span<const std::int64_t>,
-                                         std::span<const LandmarkObservation>,
-                                         std::span<const std::uint32_t>, memory::ParticleMap&,
-                                         MapUpdateScratch&, MapUpdateCounts&,
-                                         std::span<const AssociationCandidate>);
-template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
-                                        const std::vector<PlannedObservation>&,
-                                        std::span<const std::int64_t>,
-                                        std::span<const LandmarkObservation>,
-                                        std::span<const std::uint32_t>, memory::ParticleMap&,
-                                        MapUpdateScratch&, MapUpdateCounts&,
-                                        std::span<const AssociationCandidate>);
+template double update_particle_map<false>(const MapUpdateInput&, const Pose&,
+                                           const std::vector<PlannedObservation>&,
+                                           std::span<const std::int64_t>,
+                                           std::span<const LandmarkObservation>,
+                                           std::span<const std::uint32_t>, memory::ParticleMap&,
+                                           MapUpdateScratch&, MapUpdateCounts&,
+                                           std::span<const AssociationCandidate>);
+template double update_particle_map<true>(const MapUpdateInput&, const Pose&,
+                                          const std::vector<PlannedObservation>&,
+                                          std::span<const std::int64_t>,
+                                          std::span<const LandmarkObservation>,
+                                          std::span<const std::uint32_t>, memory::ParticleMap&,
+                                          MapUpdateScratch&, MapUpdateCounts&,
+                                          std::span<const AssociationCandidate>);
 
 }  // namespace fastslam::engine::internal

@@ -3,14 +3,15 @@
 // move with their means; with LoopClosureConfig::merge_gate, a confirmed twin of a chosen landmark
 // (another candidate of its observation, within the gate of it) is merged into it; every landmark
 // in the sensor's footprint that was not chosen loses existence log-odds and is removed below the
-// bound (negative information, eq. 73-75); then the new landmarks enter the map and the index,
-// with ids (scan step) * 2^20 + (observation index). The particle's memory::ParticleMap keeps its
-// tree and spatial index in step; an index entry's extent is its landmark's largest covariance
-// eigenvalue, `largest_variance`.
-// Thread safety: writes only the particle's map; concurrent calls on distinct
-// particles with distinct scratch are safe. Costs: O((Z + k) log N) for Z observations and k
-// landmarks in view, plus O(k log k) to order them, and O(c Z) for c candidates to find twins; no
-// allocation once the scratch has grown, beyond the maps' path copies.
+// bound (negative information, eq. 73-75), and under data association sampling with a detection
+// model each confirmed one of them is a missed detection in the particle's weight; then the new
+// landmarks enter the map and the index, with ids (scan step) * 2^20 + (observation index). The
+// particle's memory::ParticleMap keeps its tree and spatial index in step; an index entry's extent
+// is its landmark's largest covariance eigenvalue, `largest_variance`. Thread safety: writes only
+// the particle's map; concurrent calls on distinct particles with distinct scratch are safe. Costs:
+// O((Z + k) log N) for Z observations and k landmarks in view, plus O(k log k) to order them, and
+// O(c Z) for c candidates to find twins; no allocation once the scratch has grown, beyond the maps'
+// path copies.
 #pragma once
 
 #include <cstdint>
@@ -56,6 +57,10 @@ struct MapUpdateInput {
   double field_of_view = 0.0;
   std::uint64_t scan_step = 0;
   double merge_gate = 0.0;  // LoopClosureConfig::merge_gate; 0: twins are never merged
+  // ln(1 - P_D) under data association sampling with a detection model (P_D < 1, false
+  // alarms): the likelihood factor of each confirmed landmark in the footprint that the scan's
+  // draw left undetected, which the draw's normalisers leave out. 0: none.
+  double log_missed = 0.0;
 };
 
 // Landmarks the update started and removed (by negative information, or merged into a twin).
@@ -67,26 +72,26 @@ struct MapUpdateCounts {
 // One particle's map update. assignment[j]: observation j's slot or kNewLandmark. FastSLAM 1.0
 // (kFs2 false) reuses the association's EKF terms, terms[chosen_terms[j]] (same pose, same
 // landmark, since no other observation takes it); 2.0 evaluates them at the drawn `pose`.
+// Returns the particle's log-weight factor of its missed detections: in.log_missed times the
+// confirmed landmarks in the footprint that no observation took (0 when in.log_missed is 0).
 template <bool kFs2>
-void update_particle_map(const MapUpdateInput& in, const Pose& pose,
-                         const std::vector<PlannedObservation>& scan,
-                         std::span<const std::int64_t> assignment,
-                         std::span<const LandmarkObservation> terms,
-                         std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
-                         MapUpdateScratch& scratch, MapUpdateCounts& counts,
-                         std::span<const AssociationCandidate> candidates = {});
+double update_particle_map(const MapUpdateInput& in, const Pose& pose,
+                           const std::vector<PlannedObservation>& scan,
+                           std::span<const std::int64_t> assignment,
+                           std::span<const LandmarkObservation> terms,
+                           std::span<const std::uint32_t> chosen_terms, memory::ParticleMap& map,
+                           MapUpdateScratch& scratch, MapUpdateCounts& counts,
+                           std::span<const AssociationCandidate> candidates = {});
 
-extern template void update_particle_map<false>(
+extern template double update_particle_map<false>(
     const MapUpdateInput&, const Pose&, const std::vector<PlannedObservation>&,
     std::span<const std::int64_t>, std::span<const LandmarkObservation>,
     std::span<const std::uint32_t>, memory::ParticleMap&, MapUpdateScratch&, MapUpdateCounts&,
     std::span<const AssociationCandidate>);
-extern template void update_particle_map<true>(const MapUpdateInput&, const Pose&,
-                                               const std::vector<PlannedObservation>&,
-                                               std::span<const std::int64_t>,
-                                               std::span<const LandmarkObservation>,
-                                               std::span<const std::uint32_t>, memory::ParticleMap&,
-                                               MapUpdateScratch&, MapUpdateCounts&,
-                                               std::span<const AssociationCandidate>);
+extern template double update_particle_map<true>(
+    const MapUpdateInput&, const Pose&, const std::vector<PlannedObservation>&,
+    std::span<const std::int64_t>, std::span<const LandmarkObservation>,
+    std::span<const std::uint32_t>, memory::ParticleMap&, MapUpdateScratch&, MapUpdateCounts&,
+    std::span<const AssociationCandidate>);
 
 }  // namespace fastslam::engine::internal

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -88,6 +89,16 @@ class ParticlePass final : public Pass {
     return std::chrono::duration<double>(b - a).count();
   }
 
+  // MapUpdateInput::log_missed: ln(1 - P_D) under data association sampling with a detection
+  // model of false alarms (clutter density > 0) and P_D < 1, else 0. Without false alarms the
+  // map holds few landmarks that are not there, and the factor then only weighs where the
+  // footprint's edge falls for each particle (docs/association.md, "Missed detections").
+  static double missed_detection_log(const FilterConfig& c) {
+    if (kAssociation != Association::kDataAssociationSampling) return 0.0;
+    if (!(c.detection.probability < 1.0) || !(c.detection.clutter_density > 0.0)) return 0.0;
+    return std::log1p(-c.detection.probability);
+  }
+
   PassInputs inputs(std::uint64_t scan_step) const {
     const FilterConfig& c = s_.config;
     PassInputs in;
@@ -113,7 +124,8 @@ class ParticlePass final : public Pass {
               c.sensor.max_range,
               c.sensor.field_of_view,
               scan_step,
-              c.loop_closure.merge_gate};
+              c.loop_closure.merge_gate,
+              missed_detection_log(c)};
     in.loop = {c.loop_closure, c.existence.confirm_at, c.sensor.max_range, scan_step};
     in.scan_step = scan_step;
     in.record = c.record_trajectory && !s_.pending.empty();
@@ -222,11 +234,12 @@ class ParticlePass final : public Pass {
       const Clock::time_point chosen = Clock::now();
       associate_seconds += seconds_between(mark, chosen);
       const Pose pose(s_.store.x()[i], s_.store.y()[i], s_.store.theta()[i]);
-      update_particle_map<kFs2>(
+      const double missed = update_particle_map<kFs2>(
           in.map, pose, scan, scratch.assignment, scratch.search.terms, scratch.chosen_terms,
           s_.store.map(i), scratch.map, counts,
           kMl && !kFs2 ? std::span<const AssociationCandidate>(scratch.rivals)
                        : std::span<const AssociationCandidate>(scratch.search.candidates));
+      if (missed != 0.0) s_.store.log_weight()[i] += missed;
       if (in.loop.config.reach > 0.0 && !scratch.map.confirmed.empty()) {
         Pose moved = pose;
         if (close_loop(in.loop, scratch.map.confirmed, s_.store.map(i), moved, scratch.loop)) {

@@ -2219,5 +2219,78 @@ TEST(FilterSetMapTest, SharedPriorMapIsUsedAndBadMapsAreRefused) {
   }
 }
 
+// Data association sampling with P_D < 1 and false alarms: a particle's weight gains ln(1 - P_D)
+// for each confirmed landmark in view that its draw left undetected. FastSLAM 1.0 with every
+// particle at one pose, so that the scan's normalisers are the same in all: a scan of two
+// observations, each of which some draws take and others start anew, one of confirmed A and one
+// of provisional C. The log-weights then differ by exactly ln(1 - P_D) where A's draws differ
+// and not at all where only C's do (a provisional landmark is not counted; map_update_test
+// checks which landmarks count against brute-force geometry). Without false alarms, under
+// maximum likelihood, and for FastSLAM 2.0 the same run leaves A's draw out of the weight.
+TEST(FilterDetectionTest, SamplingWeighsTheConfirmedLandmarksItMissed) {
+  const double p_d = 0.7;
+  const std::vector<MapLandmark> map = {
+      {0, 1, 10.0, 0.0, 0.04, 0.0, 0.04, 5.0, 0},   // A, confirmed
+      {0, 2, 5.0, 12.0, 0.04, 0.0, 0.04, 5.0, 0},   // B, confirmed, in view, never observed
+      {0, 3, 15.0, -8.0, 0.04, 0.0, 0.04, 1.0, 0},  // C, provisional
+      {0, 4, -10.0, 0.0, 0.04, 0.0, 0.04, 5.0, 0},  // behind
+  };
+  // Each observation 0.9 m long of its landmark: m^2 about 16, so that some draws take "new".
+  const double c_range = std::hypot(15.0, -8.0);
+  const std::vector<Observation> scan = {{10.9, 0.0, -1},
+                                         {c_range + 0.9, std::atan2(-8.0, 15.0), -1}};
+  for (const Algorithm algorithm : {Algorithm::kFastSlam1, Algorithm::kFastSlam2}) {
+    for (const Association association :
+         {Association::kDataAssociationSampling, Association::kMaximumLikelihood}) {
+      for (const double clutter : {1e-4, 0.0}) {
+        SCOPED_TRACE(std::string(to_string(algorithm)) + " " + std::string(to_string(association)) +
+                     (clutter > 0.0 ? "" : " no clutter"));
+        FilterConfig config = base_config(algorithm, 200);
+        config.association = association;
+        config.detection.probability = p_d;
+        config.detection.clutter_density = clutter;
+        config.resample = {parallel::ResamplePolicy::When::kEssBelowFraction, 0.0};
+        Filter filter(config);
+        filter.set_map(map);
+        filter.observe(scan);
+        const memory::ParticleStore& store = filter.particles();
+        // Weight by (A taken, C taken): A's log-odds rose from 5 by `seen`, C's from 1.
+        std::map<std::pair<bool, bool>, std::vector<double>> groups;
+        for (std::size_t i = 0; i < store.size(); ++i) {
+          const bool took_a = store.map(i).at(0).log_odds > 5.0;
+          const bool took_c = store.map(i).at(2).log_odds > 1.0;
+          groups[{took_a, took_c}].push_back(store.log_weight()[i]);
+        }
+        if (algorithm == Algorithm::kFastSlam2) {
+          // The drawn poses differ; what is left to check is that both of A's outcomes ran.
+          if (association == Association::kDataAssociationSampling) {
+            EXPECT_GE(groups.size(), 2u);
+          }
+          continue;
+        }
+        if (association == Association::kMaximumLikelihood) {
+          ASSERT_EQ(groups.size(), 1u);
+          continue;
+        }
+        ASSERT_EQ(groups.size(), 4u);  // the test can fail: every outcome was drawn
+        const double step = clutter > 0.0 ? std::log1p(-p_d) : 0.0;
+        const double took = groups.at({true, true}).front();
+        for (const auto& [outcome, weights] : groups) {
+          for (const double w : weights) {
+            if (outcome.first) {
+              EXPECT_EQ(w, took);
+            } else {
+              EXPECT_NEAR(w, took + step, 1e-12);
+              if (clutter > 0.0) {
+                EXPECT_NE(w, took);
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fastslam::engine

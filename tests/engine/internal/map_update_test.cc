@@ -5,6 +5,7 @@
 // must give the same bits as 2.0's evaluation at the same pose.
 #include "engine/internal/map_update.h"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <random>
@@ -219,6 +220,47 @@ TEST(MapUpdateTest, ReusedTermsGiveTheSameBits) {
     EXPECT_EQ(l.x, other.x);
     EXPECT_EQ(l.sxy, other.sxy);
     EXPECT_EQ(l.log_odds, other.log_odds);
+  }
+}
+
+// Data association sampling under a detection probability below one: every confirmed landmark
+// in view that no observation took is a missed detection, ln(1 - P_D) in the particle's weight
+// (counted before negative information lowers it); the map changes as without the factor, and
+// the factor stays when negative information is off.
+TEST(MapUpdateTest, MissedDetectionsAreTheConfirmedLandmarksInViewLeftUntaken) {
+  const double log_missed = std::log1p(-0.7);
+  std::size_t missed = 0;
+  std::size_t provisional = 0;
+  {
+    const World w;
+    for (const auto& [slot, l] : w.oracle) {
+      if (!w.in_view(l)) continue;
+      if (std::find(w.assignment.begin(), w.assignment.end(), slot) != w.assignment.end()) continue;
+      if (l.log_odds >= w.in.existence.confirm_at) {
+        ++missed;
+      } else {
+        ++provisional;
+      }
+    }
+  }
+  ASSERT_GT(missed, 2u);
+  ASSERT_GT(provisional, 2u);
+  for (const bool negative : {true, false}) {
+    World with, without;
+    with.in.log_missed = log_missed;
+    with.in.existence.negative_information = without.in.existence.negative_information = negative;
+    MapUpdateScratch scratch;
+    MapUpdateCounts counts_with, counts_without;
+    const double got = update_particle_map<true>(with.in, with.pose, with.scan, with.assignment, {},
+                                                 {}, with.map, scratch, counts_with);
+    EXPECT_EQ(got, static_cast<double>(missed) * log_missed) << negative;
+    EXPECT_EQ(update_particle_map<true>(without.in, without.pose, without.scan, without.assignment,
+                                        {}, {}, without.map, scratch, counts_without),
+              0.0);
+    EXPECT_EQ(counts_with.removed, counts_without.removed);
+    EXPECT_EQ(negative, counts_with.removed > 0);
+    ASSERT_EQ(with.map.size(), without.map.size());
+    for (const auto [slot, l] : with.map) EXPECT_EQ(l, without.map.at(slot));
   }
 }
 
