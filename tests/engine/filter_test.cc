@@ -1940,15 +1940,20 @@ TEST_P(FilterUnknownAssociationTest, BitIdenticalForAnyThreadCountAndGrain) {
   const Scenario& s = clutter_scenario();
   FilterConfig c = config(kSanitized ? 24 : 64);
   c.record_trajectory = true;
-  for (const double merge_gate : {0.0, 9.21}) {  // twin merging off, on
+  // Twin merging off and on; a detection model with false alarms (sampling's missed detections).
+  for (const auto& [merge_gate, detection] :
+       {std::pair{0.0, DetectionConfig{}}, std::pair{9.21, DetectionConfig{}},
+        std::pair{0.0, DetectionConfig{0.8, 1e-3}}}) {
     c.loop_closure.merge_gate = merge_gate;
+    c.detection = detection;
     c.threads = 1;
     c.grain = FilterConfig{}.grain;
     const RunResult reference = run_scenario(c, s);
     for (const auto& [threads, grain] :
          {std::pair<unsigned, std::size_t>{2, 1}, {2, 7}, {2, 64}}) {
-      SCOPED_TRACE("merge gate " + std::to_string(merge_gate) + ", threads " +
-                   std::to_string(threads) + ", grain " + std::to_string(grain));
+      SCOPED_TRACE("merge gate " + std::to_string(merge_gate) + ", P_D " +
+                   std::to_string(detection.probability) + ", threads " + std::to_string(threads) +
+                   ", grain " + std::to_string(grain));
       c.threads = threads;
       c.grain = grain;
       expect_same_run(run_scenario(c, s), reference);
