@@ -87,10 +87,11 @@ struct ExistenceConfig {
   double remove_below = 0.0;         // removed when the log-odds fall below this
   // A landmark is provisional while its log-odds are below this: it takes part in association
   // and negative information like any other, but the estimate's map leaves it out. The default
-  // (initial + seen) confirms a landmark at its second association net of misses, so a false
+  // (initial + 2 seen) confirms a landmark at its third association net of misses, so a false
   // alarm that is never detected again, or that leaves the view before it is missed often
-  // enough to be removed, never reaches the map.
-  double confirm_at = 2.0;
+  // enough to be removed, never reaches the map, nor does one that a second false alarm fell
+  // near by chance (docs/association.md, "Existence and negative information").
+  double confirm_at = 3.0;
   // A landmark counts as in view when its mean is within max_range - range_margin of the
   // sensor and inside the field of view: one at the edge is detected or not by where it truly
   // is, which its estimate does not know to better than its uncertainty.

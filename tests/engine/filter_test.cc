@@ -1968,6 +1968,7 @@ TEST_P(FilterUnknownAssociationTest, TwinMergingChangesTheRunAndSurvivesALoad) {
   const Scenario& s = clutter_scenario();
   FilterConfig c = config(kSanitized ? 24 : 64);
   c.threads = 2;
+  c.existence.confirm_at = 2.0;  // twins confirmed at their second sighting: this loop has some
   const RunResult unmerged = run_scenario(c, s);
   c.loop_closure.merge_gate = 9.21;
   const RunResult merged = run_scenario(c, s);
@@ -2064,7 +2065,7 @@ TEST_P(FilterUnknownAssociationTest, ProvisionalLandmarksStayOutOfTheReportedMap
   FilterConfig c = config(kSanitized ? 16 : 50);
   c.threads = 2;
   c.loop_closure.merge_gate = 0.0;
-  ASSERT_EQ(c.existence.confirm_at, 2.0);
+  ASSERT_EQ(c.existence.confirm_at, 3.0);
   Filter filter(c);
   feed(filter, s.events, 0, s.events.size());
   FilterConfig all = c;
@@ -2080,7 +2081,7 @@ TEST_P(FilterUnknownAssociationTest, ProvisionalLandmarksStayOutOfTheReportedMap
   EXPECT_EQ(reported.map_size, full.map_size);
   std::vector<MapLandmark> confirmed;
   for (const MapLandmark& l : full.map) {
-    if (l.log_odds >= 2.0) confirmed.push_back(l);
+    if (l.log_odds >= 3.0) confirmed.push_back(l);
   }
   ASSERT_EQ(reported.map.size(), confirmed.size());
   for (std::size_t i = 0; i < confirmed.size(); ++i) {
@@ -2118,10 +2119,11 @@ TEST_P(FilterUnknownAssociationTest, RecoversAnAmbiguousMap) {
   EXPECT_LT(unknown.pose_rmse, 1.5 * known.pose_rmse + 0.5);
   EXPECT_LT(unknown.map.rmse_m, 1.5 * known.map.rmse_m + 0.2);
   // Sampling draws the wrong twin now and then (FS2 DAS, M = 50: 12 spurious, 9 missing of 70);
-  // ML keeps to a few.
-  const std::size_t share = GetParam().association == Association::kMaximumLikelihood ? 10 : 4;
-  EXPECT_LE(unknown.map.spurious * share, unknown.observed);
-  EXPECT_LE(unknown.map.missing * share, unknown.observed);
+  // ML keeps to a few. Missing also counts the landmarks seen fewer than three times, which stay
+  // provisional (FS1 ML: 7 missing of 70 confirmed at the second sighting, 9 at the third).
+  const bool ml = GetParam().association == Association::kMaximumLikelihood;
+  EXPECT_LE(unknown.map.spurious * (ml ? 10 : 4), unknown.observed);
+  EXPECT_LE(unknown.map.missing * (ml ? 7 : 4), unknown.observed);
 }
 
 // The bar: on webmap, FS2 with ML association over 10 seeds, mean pose RMSE within 1.5x
