@@ -71,23 +71,18 @@ void collect_in_view(const MapUpdateInput& in, const Pose& pose, const memory::P
       [](const memory::SpatialEntry& a, const memory::SpatialEntry& b) { return a.slot < b.slot; });
 }
 
-// The confirmed landmarks of scratch.in_view, before negative information lowers them.
-std::size_t count_confirmed(const MapUpdateInput& in, const memory::ParticleMap& map,
-                            const MapUpdateScratch& scratch) {
-  std::size_t n = 0;
-  for (const memory::SpatialEntry& e : scratch.in_view) {
-    if (map.at(e.slot).log_odds >= in.existence.confirm_at) ++n;
-  }
-  return n;
-}
-
-// Negative information: the landmarks of scratch.in_view lose `missed` log-odds and are removed
-// below the bound, in slot order.
-void apply_negative_information(const MapUpdateInput& in, memory::ParticleMap& map,
-                                const MapUpdateScratch& scratch, MapUpdateCounts& counts) {
+// The landmarks of scratch.in_view, each missed by this scan, in slot order: with negative
+// information each loses `missed` log-odds and is removed below the bound. Returns how many of
+// them were confirmed before (sampling's missed detections).
+std::size_t miss_in_view(const MapUpdateInput& in, memory::ParticleMap& map,
+                         const MapUpdateScratch& scratch, MapUpdateCounts& counts) {
   const ExistenceConfig& ex = in.existence;
+  std::size_t confirmed = 0;
   for (const memory::SpatialEntry& e : scratch.in_view) {
-    const double log_odds = map.at(e.slot).log_odds - ex.missed;
+    const double before = map.at(e.slot).log_odds;
+    if (before >= ex.confirm_at) ++confirmed;
+    if (!ex.negative_information) continue;
+    const double log_odds = before - ex.missed;
     if (log_odds < ex.remove_below) {
       map.erase(e.slot);
       ++counts.removed;
@@ -96,6 +91,7 @@ void apply_negative_information(const MapUpdateInput& in, memory::ParticleMap& m
           e.slot, [&](memory::Landmark& stored) { stored.log_odds = log_odds; }, largest_variance);
     }
   }
+  return confirmed;
 }
 
 // Twins (filter_config.h LoopClosureConfig::merge_gate): a chosen landmark and another confirmed
@@ -178,14 +174,11 @@ double update_particle_map(const MapUpdateInput& in, const Pose& pose,
     merge_twins(in, pose, scan, assignment, candidates, map, scratch, counts);
   }
   const ExistenceConfig& ex = in.existence;
-  const bool negative = ex.negative_information;
   double log_weight = 0.0;
-  if ((negative || in.log_missed != 0.0) && in.max_range > ex.range_margin) {
+  if ((ex.negative_information || in.log_missed != 0.0) && in.max_range > ex.range_margin) {
     collect_in_view(in, pose, map, scratch);
-    if (in.log_missed != 0.0) {
-      log_weight = static_cast<double>(count_confirmed(in, map, scratch)) * in.log_missed;
-    }
-    if (negative) apply_negative_information(in, map, scratch, counts);
+    const std::size_t missed = miss_in_view(in, map, scratch, counts);
+    if (in.log_missed != 0.0) log_weight = static_cast<double>(missed) * in.log_missed;
   }
   const auto step_now = static_cast<std::int64_t>(in.scan_step);
   for (std::size_t j = 0; j < scan.size(); ++j) {
