@@ -38,6 +38,8 @@ struct Control {
   double u1 = 0.0;
 };
 
+inline constexpr std::uint64_t kLandmarkIdsPerScan = std::uint64_t{1} << 20;
+
 // One detection of a scan. `id` is the landmark's identity in known-association mode (>= 0);
 // ignored otherwise.
 struct Observation {
@@ -50,7 +52,9 @@ struct Observation {
 // conditioned on that particle's path, so they agree with its pose (Estimate::best_pose), not
 // exactly with the weighted mean pose. `log_odds` is its existence (eq. 73-75; unknown
 // association: below ExistenceConfig::remove_below it is removed, below confirm_at it is
-// provisional and left out of Estimate::map).
+// provisional and left out of Estimate::map). `id`: with known ids the observations'; under
+// unknown association (scan step) * kLandmarkIdsPerScan + (index in that scan) of the
+// observation that started it, the step counting every predict and observe call before it.
 struct MapLandmark {
   memory::Slot slot = 0;
   std::uint64_t id = 0;

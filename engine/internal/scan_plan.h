@@ -42,7 +42,7 @@ using KnownSlots = std::unordered_map<std::int64_t, memory::Slot>;
 
 // Unknown association: ids of new landmarks are (scan step) * 2^20 + (observation index), unique
 // and stable across copies; a scan may hold fewer than 2^20 observations.
-inline constexpr std::uint64_t kObservationsPerScanLimit = std::uint64_t{1} << 20;
+inline constexpr std::uint64_t kObservationsPerScanLimit = kLandmarkIdsPerScan;
 
 struct ScanPlan {
   std::vector<PlannedObservation> observations;

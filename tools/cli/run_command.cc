@@ -33,6 +33,7 @@
 #include "tools/cli/run_recorder.h"
 #include "tools/cli/run_report.h"
 #include "tools/cli/scan_stream.h"
+#include "tools/eval/landmark_provenance.h"
 #include "tools/eval/map_evaluation.h"
 #include "tools/eval/map_metrics.h"
 #include "tools/eval/particle_diagnostics.h"
@@ -62,20 +63,33 @@ class TruthTracker {
         index_(points_) {
     for (std::size_t i = 0; i < landmarks.size(); ++i) slot_[landmarks[i].id] = i;
   }
-  // Marks the scan's landmarks observed; returns an id the truth lacks (when it has
-  // landmarks at all), the first of the scan's.
-  std::optional<std::int64_t> see(std::span<const engine::Observation> scan) {
+  // Unknown association: each scan's detections are labelled by true landmark, so that the map
+  // can be traced back to them (landmark_provenance.h).
+  void record_labels() { labels_.emplace(); }
+  // Marks the scan's landmarks observed (and records their labels, the filter's step counter
+  // at the scan being `step`); returns an id the truth lacks (when it has landmarks at all),
+  // the first of the scan's.
+  std::optional<std::int64_t> see(std::span<const engine::Observation> scan, std::uint64_t step) {
     std::optional<std::int64_t> unknown;
+    scan_labels_.clear();
     for (const engine::Observation& z : scan) {
-      if (z.id < 0) continue;
-      const auto found = slot_.find(static_cast<std::uint64_t>(z.id));
+      std::int32_t label = ObservationLabels::kNoLandmark;
+      const auto found = z.id < 0 ? slot_.end() : slot_.find(static_cast<std::uint64_t>(z.id));
       if (found != slot_.end()) {
         observed_flags_[found->second] = true;
-      } else if (!unknown && !landmarks_.empty()) {
+        label = static_cast<std::int32_t>(found->second);
+      } else if (z.id >= 0 && !unknown && !landmarks_.empty()) {
         unknown = z.id;
       }
+      scan_labels_.push_back(label);
     }
+    if (labels_) labels_->add(step, scan_labels_);
     return unknown;
+  }
+  // The map's landmarks traced to what started them; nothing unless labels were recorded.
+  std::optional<Provenance> provenance(std::span<const engine::MapLandmark> map) const {
+    if (!labels_) return std::nullopt;
+    return landmark_provenance(map, *labels_);
   }
   std::span<const bool> observed() const { return {observed_flags_.get(), landmarks_.size()}; }
   std::size_t observed_count() const {
@@ -95,6 +109,7 @@ class TruthTracker {
   MapScores scores(std::span<const engine::MapLandmark> map, bool known, double match_radius,
                    const std::optional<AlignedAte>& alignment) const {
     MapScores s;
+    s.provenance = provenance(map);
     s.paired = score(map, match_radius);
     s.rmse = known ? landmark_rmse_by_id(map, landmarks_) : s.paired.rmse_m;
     s.observed = observed_count();
@@ -128,6 +143,8 @@ class TruthTracker {
   std::unique_ptr<bool[]> observed_flags_;
   std::vector<Point> points_;
   TruthIndex index_;
+  std::optional<ObservationLabels> labels_;
+  std::vector<std::int32_t> scan_labels_;
 };
 
 // Where a run stands in its source: events consumed, controls and scans among them, and the
@@ -498,7 +515,7 @@ void drive(F& filter, RunLoop& loop, RunResult& r) {
             r.scan_latency.add(seconds_since(t_scan));
             r.innovations.add(filter.last_associations());
           });
-          if (const std::optional<std::int64_t> id = loop.truth.see(scan);
+          if (const std::optional<std::int64_t> id = loop.truth.see(scan, controls + scans);
               id && !r.unknown_id_seen) {
             // Said once, where it first happens: scoring by id will miss it.
             r.unknown_id_seen = true;
@@ -623,8 +640,8 @@ Position replay(const std::string& path, const Checkpoint& c, RunLoop& loop) {
         loop.recorder.control(event);
         break;
       case EventKind::kScan: {
+        loop.truth.see(scan, at.controls + at.scans);
         ++at.scans;
-        loop.truth.see(scan);
         std::size_t end = handed;
         while (end < c.poses.size() && c.poses[end].control < at.controls) ++end;
         loop.recorder.estimates(std::span(c.poses).subspan(handed, end - handed));
@@ -915,6 +932,9 @@ nlohmann::json run_once(const RunOptions& given, const std::function<void()>& ac
   state.total = static_cast<std::uint64_t>(info.expected_controls);
   state.particles = particles;
   TruthTracker truth(info.landmarks);
+  if (!ekf && config.association != engine::Association::kKnown && !info.landmarks.empty()) {
+    truth.record_labels();
+  }
   engine::FilterStatistics before;
   std::uint64_t trace_scans = 0;
   if (resumed) trace_scans = restore_run_state(options.resume, resumed->run, r, before);

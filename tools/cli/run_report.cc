@@ -163,6 +163,14 @@ nlohmann::json metrics_json(const RunSettings& s, const RunResult& r) {
       m["gospa_aligned_missed"] = map.gospa_aligned->missed;
       m["gospa_aligned_false"] = map.gospa_aligned->false_targets;
     }
+    if (map.provenance) {
+      // What started each reported landmark (tools/eval/landmark_provenance.h).
+      m["landmark_origins"] = {{"false_alarms", map.provenance->from_false_alarms},
+                               {"true_landmarks", map.provenance->from_true_landmarks},
+                               {"second_copies", map.provenance->second_copies},
+                               {"distinct_true_landmarks", map.provenance->true_landmarks_mapped},
+                               {"unknown", map.provenance->unlabelled}};
+    }
     // Components of the pair graph too large to solve exactly were paired greedily: the GOSPA
     // is then an upper bound (tools/eval/map_metrics.h).
     m["gospa_inexact_components"] = map.gospa.inexact_components;
@@ -224,6 +232,13 @@ void print_summary(const RunSettings& s, const RunResult& r, std::FILE* out) {
                    map.gospa_aligned->distance, map.gospa_aligned->assigned,
                    localisation_rms(*map.gospa_aligned), map.gospa_aligned->missed,
                    map.gospa_aligned->false_targets);
+    }
+    if (map.provenance) {
+      std::fprintf(out,
+                   "    started by: %zu false alarms; %zu true landmarks, %zu of them second "
+                   "copies\n",
+                   map.provenance->from_false_alarms, map.provenance->from_true_landmarks,
+                   map.provenance->second_copies);
     }
   }
   if (s.association.discard_unlabelled) {

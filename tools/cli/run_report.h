@@ -22,6 +22,7 @@
 #include "tools/cli/run_recorder.h"
 #include "tools/datasets/source.h"
 #include "tools/eval/innovation_stats.h"
+#include "tools/eval/landmark_provenance.h"
 #include "tools/eval/latency_histogram.h"
 #include "tools/eval/map_evaluation.h"
 #include "tools/eval/map_metrics.h"
@@ -39,6 +40,8 @@ struct MapScores {
   double precision = 0.0;  // of the optimal matching within the match radius
   double recall = 0.0;
   std::size_t observed = 0;  // true landmarks observed
+  // Unknown association (particle filters): what started each landmark of the map.
+  std::optional<Provenance> provenance;
 };
 
 // Everything a run measured.

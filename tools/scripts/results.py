@@ -78,7 +78,8 @@ ACCURACY = [
       ("EKF-SLAM, ML", f"{WEBMAP} --algorithm ekf --association ml")]),
     ("clutter", "Bailey's webmap with false alarms and missed detections, M = 100",
      ["pose_rmse_aligned_m", "dead_reckoning.pose_rmse_aligned_m", "landmarks",
-      "gospa_aligned_false", "gospa_aligned_missed"],
+      "gospa_aligned_false", "gospa_aligned_missed", "landmark_origins.false_alarms",
+      "landmark_origins.second_copies"],
      "`--clutter 2 --detection-probability 0.8`: a Poisson number of false alarms per scan "
      "(mean 2) uniform over the sensor's footprint, and each true landmark in view detected with "
      "probability 0.8; the filter weighs \"no landmark\" against that false-alarm density and "
@@ -87,7 +88,11 @@ ACCURACY = [
      "off in the rows \"no loop closure\"). "
      "Pose RMSE after the best rigid fit, against dead reckoning's; landmarks: "
      "in the most likely particle's reported map (30 true ones are observed); false and missed: "
-     "GOSPA's unassigned estimated and true landmarks (cutoff 5 m) after the path's alignment. "
+     "GOSPA's unassigned estimated and true landmarks (cutoff 5 m) after the path's alignment: "
+     "a real landmark mapped more than 5 m off counts as both. What started each reported "
+     "landmark tells them apart (docs/evaluation.md, \"Where each landmark came from\"): "
+     "`landmark_origins.false_alarms` were started by a false alarm, "
+     "`landmark_origins.second_copies` are extra copies of a true landmark. "
      "The rows \"every landmark reported\" set `--existence-confirm-at -1e9`, so provisional "
      "landmarks (docs/association.md) are in the map too, and every landmark counts as confirmed "
      "for loop closure.",
@@ -135,11 +140,14 @@ ACCURACY = [
        "--vp-laser-yaw-deg -0.5")]),
     ("utias", "UTIAS MRCLAM dataset 1 (real, 5 robots, 75000 controls each, Vicon truth)",
      ["pose_rmse_m", "pose_rmse_aligned_m", "pose_rpe_translation_rmse_m",
-      "dead_reckoning.pose_rmse_m", "gospa_aligned_m", "landmarks"],
+      "dead_reckoning.pose_rmse_m", "gospa_aligned_m", "landmarks",
+      "landmark_origins.second_copies"],
      "Against Vicon at 10 Hz: pose RMSE raw and after the best rigid fit; RPE over 1 m of path; "
      "dead reckoning's raw RMSE; the map's GOSPA (cutoff 0.5 m, order 2) after the path's "
-     "alignment; landmarks mapped (15 true). Mixed: the barcodes as landmark ids (the source's "
-     "default); ML: the barcodes ignored.",
+     "alignment; landmarks mapped (15 true) and, under ML, how many of them are second copies "
+     "of a landmark (by the barcode of the detection that started each; docs/evaluation.md, "
+     "\"Where each landmark came from\"). "
+     "Mixed: the barcodes as landmark ids (the source's default); ML: the barcodes ignored.",
      [(f"robot {r}, FastSLAM 1.0, M = 100, mixed", f"{UTIAS} --robot {r}") for r in range(1, 6)] +
      [(f"robot {r}, FastSLAM 2.0, M = 100, mixed", f"{UTIAS} --robot {r} --algorithm fastslam2")
       for r in range(1, 6)] +
@@ -293,9 +301,11 @@ def summary(values):
     clean = [v for v in values if v is not None]
     if not clean:
         return "-"
-    integer = all(isinstance(v, int) for v in clean)
-    return (f"{fmt(statistics.mean(clean), integer)} / {fmt(statistics.median(clean), integer)} / "
-            f"{fmt(max(clean), integer)}")
+    if all(isinstance(v, int) for v in clean):  # counts: the mean to a tenth
+        return (f"{statistics.mean(clean):.1f} / {fmt(statistics.median(clean), True)} / "
+                f"{fmt(max(clean), True)}")
+    return (f"{fmt(statistics.mean(clean))} / {fmt(statistics.median(clean))} / "
+            f"{fmt(max(clean))}")
 
 
 def render(data):

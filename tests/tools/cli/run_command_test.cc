@@ -870,6 +870,50 @@ TEST(RunCommand, AutoAssociationFollowsTheLabels) {
   std::filesystem::remove_all(cluttered.out);
 }
 
+// Unknown association: metrics.json traces every reported landmark to the observation that
+// started it (tools/eval/landmark_provenance.h). Without false alarms none is a false alarm's;
+// with clutter and every provisional landmark reported, many are, and confirmation keeps most
+// of them out; known ids report no origins.
+TEST(RunCommand, ReportsWhatStartedEachLandmark) {
+  const auto origins = [](const RunOptions& o) {
+    const nlohmann::json m = read_metrics(o.out);
+    EXPECT_TRUE(m.contains("landmark_origins")) << o.out;
+    const nlohmann::json& g = m["landmark_origins"];
+    EXPECT_EQ(g["unknown"], 0);
+    EXPECT_EQ(g["false_alarms"].get<std::size_t>() + g["true_landmarks"].get<std::size_t>(),
+              m["landmarks"].get<std::size_t>());
+    EXPECT_EQ(g["true_landmarks"].get<std::size_t>() - g["second_copies"].get<std::size_t>(),
+              g["distinct_true_landmarks"].get<std::size_t>());
+    EXPECT_LE(g["distinct_true_landmarks"].get<std::size_t>(),
+              m["observed_landmarks"].get<std::size_t>());
+    std::filesystem::remove_all(o.out);
+    return g;
+  };
+  RunOptions clean = small_loop("origins_clean");
+  clean.association = "ml";
+  ASSERT_EQ(run_simulation(clean), 0);
+  const nlohmann::json without = origins(clean);
+  EXPECT_EQ(without["false_alarms"], 0);
+  EXPECT_GT(without["distinct_true_landmarks"].get<int>(), 20);
+
+  RunOptions cluttered = small_loop("origins_clutter");
+  cluttered.association = "ml";
+  cluttered.sim.clutter_rate = 2.0;
+  ASSERT_EQ(run_simulation(cluttered), 0);
+  const nlohmann::json confirmed = origins(cluttered);
+  cluttered.filter.existence.confirm_at = -1e9;
+  ASSERT_EQ(run_simulation(cluttered), 0);
+  const nlohmann::json every = origins(cluttered);
+  EXPECT_GT(every["false_alarms"].get<int>(), 10);
+  EXPECT_LT(confirmed["false_alarms"].get<int>(), every["false_alarms"].get<int>() / 4);
+
+  RunOptions known = small_loop("origins_known");
+  known.association = "known";
+  ASSERT_EQ(run_simulation(known), 0);
+  EXPECT_FALSE(read_metrics(known.out).contains("landmark_origins"));
+  std::filesystem::remove_all(known.out);
+}
+
 // A log mixing labelled detections with unlabelled false alarms: known association refuses it
 // naming the file, line and time and the options that accept it; mixed association discards
 // exactly the unlabelled ones, so it runs as the simulator's own known-association run (which

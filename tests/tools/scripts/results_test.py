@@ -18,8 +18,10 @@ class Summary(unittest.TestCase):
     def test_mean_median_worst(self):
         self.assertEqual(results.summary([1.0, 2.0, 6.0]), "3.00 / 2.00 / 6.00")
 
-    def test_integers_stay_integers(self):
-        self.assertEqual(results.summary([486, 487, 490]), "488 / 487 / 490")
+    def test_counts_keep_a_tenth_in_their_mean(self):
+        # A mean of 0.4 false landmarks a run must not print as 0.
+        self.assertEqual(results.summary([486, 487, 490]), "487.7 / 487 / 490")
+        self.assertEqual(results.summary([0, 0, 1, 0, 1]), "0.4 / 0 / 1")
 
     def test_missing_values_are_skipped(self):
         self.assertEqual(results.summary([None, 4.0]), "4.00 / 4.00 / 4.00")
