@@ -42,11 +42,19 @@ void flatten(const nlohmann::json& m, const std::string& prefix,
 }
 
 // The errors a sweep's table shows, those the runs have.
-constexpr const char* kHeadline[] = {
-    "pose_rmse_m", "pose_rmse_aligned_m", "dead_reckoning.pose_rmse_m",
-    "gps_rmse_m",  "gps_rmse_aligned_m",  "dead_reckoning.gps_rmse_m",
-    "gospa_m",     "gospa_aligned_m",     "landmark_rmse_m",
-    "landmarks",   "wall_seconds"};
+constexpr const char* kHeadline[] = {"pose_rmse_m",
+                                     "pose_rmse_aligned_m",
+                                     "dead_reckoning.pose_rmse_m",
+                                     "gps_rmse_m",
+                                     "gps_rmse_aligned_m",
+                                     "dead_reckoning.gps_rmse_m",
+                                     "gospa_m",
+                                     "gospa_aligned_m",
+                                     "landmark_rmse_m",
+                                     "landmarks",
+                                     "landmark_origins.false_alarms",
+                                     "landmark_origins.second_copies",
+                                     "wall_seconds"};
 
 }  // namespace
 
@@ -170,7 +178,7 @@ void print_headline(const nlohmann::json& summary) {
   for (const char* key : kHeadline) {
     if (!summary.contains(key)) continue;
     const nlohmann::json& s = summary[key];
-    std::printf("  %-28s %10.3f / %10.3f / %10.3f / %8.3f\n", key, s["mean"].get<double>(),
+    std::printf("  %-30s %10.3f / %10.3f / %10.3f / %8.3f\n", key, s["mean"].get<double>(),
                 s["median"].get<double>(), s["max"].get<double>(), s["stdev"].get<double>());
   }
 }
