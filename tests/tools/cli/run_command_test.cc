@@ -214,6 +214,7 @@ TEST(RunCommand, OutDirectoryGetsTheMapPicture) {
   o.plot = "none";
   ASSERT_EQ(run_simulation(o), 0);
   EXPECT_FALSE(std::filesystem::exists(o.out + "/map.svg"));
+  std::filesystem::remove_all(o.out);
 
   if (std::system("/usr/bin/python3 -c 'import matplotlib' 2>/dev/null") != 0) {
     GTEST_SKIP() << "no /usr/bin/python3 with matplotlib (tools/lib/setup.sh installs it)";
@@ -224,12 +225,14 @@ TEST(RunCommand, OutDirectoryGetsTheMapPicture) {
   ASSERT_EQ(run_simulation(o), 0);
   EXPECT_GT(std::filesystem::file_size(o.out + "/map.png"), 10'000u);
   EXPECT_FALSE(std::filesystem::exists(o.out + "/map.svg"));
+  std::filesystem::remove_all(o.out);
 
   o.out = temp_path("run_picture_failing_script");
   o.plot_script = o.out + "/no_such_script.py";
   ASSERT_EQ(run_simulation(o), 0);
   EXPECT_TRUE(std::filesystem::exists(o.out + "/metrics.json"));
   EXPECT_FALSE(std::filesystem::exists(o.out + "/map.png"));
+  std::filesystem::remove_all(o.out);
 }
 
 // The native picture that fails (a malformed file in the directory) is a warning naming the
@@ -1017,6 +1020,7 @@ TEST(RunCommand, FilterErrorsNameTheRecord) {
   EXPECT_NE(error.find(o.data + ":11 (scan 1, t = 0.100 s): "), std::string::npos) << error;
   EXPECT_NE(error.find("appears twice"), std::string::npos) << error;
   std::filesystem::remove(o.data);
+  std::filesystem::remove_all(o.out);
 }
 
 TEST(RunCommand, BudgetsEndTheRunAndSaySo) {
