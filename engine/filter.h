@@ -38,6 +38,8 @@ struct Control {
   double u1 = 0.0;
 };
 
+// Unknown association names a new landmark (scan step) * kLandmarkIdsPerScan + (observation
+// index) (MapLandmark::id): unique and stable across copies, so a scan holds fewer observations.
 inline constexpr std::uint64_t kLandmarkIdsPerScan = std::uint64_t{1} << 20;
 
 // One detection of a scan. `id` is the landmark's identity in known-association mode (>= 0);

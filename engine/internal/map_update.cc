@@ -186,7 +186,7 @@ double update_particle_map(const MapUpdateInput& in, const Pose& pose,
     memory::Landmark stored;
     store_gaussian(initialize_landmark(*in.sensor, pose, scan[j].z, in.r), stored);
     stored.log_odds = ex.initial;
-    stored.id = in.scan_step * kObservationsPerScanLimit + j;
+    stored.id = in.scan_step * kLandmarkIdsPerScan + j;
     stored.last_seen = step_now;
     const memory::Slot slot = map.insert(stored, largest_variance(stored));
     if (stored.log_odds >= ex.confirm_at) scratch.confirmed.push_back(slot);

@@ -78,10 +78,10 @@ ScanPlan plan_scan(std::span<const Observation> scan, Association association,
     }
     plan.observations.push_back(p);
   }
-  if (association != Association::kKnown && scan.size() >= kObservationsPerScanLimit) {
+  if (association != Association::kKnown && scan.size() >= kLandmarkIdsPerScan) {
     throw std::invalid_argument("Filter::observe: a scan holds at most " +
-                                std::to_string(kObservationsPerScanLimit - 1) +
-                                " observations (got " + std::to_string(scan.size()) + ")");
+                                std::to_string(kLandmarkIdsPerScan - 1) + " observations (got " +
+                                std::to_string(scan.size()) + ")");
   }
   return plan;
 }

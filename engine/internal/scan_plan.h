@@ -40,10 +40,6 @@ struct PlannedObservation {
 // Known association: landmark id -> its slot, the same in every particle's map.
 using KnownSlots = std::unordered_map<std::int64_t, memory::Slot>;
 
-// Unknown association: ids of new landmarks are (scan step) * 2^20 + (observation index), unique
-// and stable across copies; a scan may hold fewer than 2^20 observations.
-inline constexpr std::uint64_t kObservationsPerScanLimit = kLandmarkIdsPerScan;
-
 struct ScanPlan {
   std::vector<PlannedObservation> observations;
   KnownSlots new_slots;  // known association: the ids this scan adds

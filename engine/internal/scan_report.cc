@@ -19,7 +19,7 @@ std::vector<ObservationAssociation> report_scan(const memory::ParticleStore& sto
       a.landmark_id = scan[j].id;
     } else if (records.assignment(j, best) == kNewLandmark) {
       is_new = true;
-      a.landmark_id = scan_step * kObservationsPerScanLimit + j;  // as map_update.h names it
+      a.landmark_id = scan_step * kLandmarkIdsPerScan + j;  // as map_update.h names it
     } else {
       const auto slot = static_cast<memory::Slot>(records.assignment(j, best));
       a.landmark_id = store.map(best).tree().at(slot).id;

@@ -81,7 +81,7 @@ class TruthTracker {
       } else if (z.id >= 0 && !unknown && !landmarks_.empty()) {
         unknown = z.id;
       }
-      scan_labels_.push_back(label);
+      if (labels_) scan_labels_.push_back(label);
     }
     if (labels_) labels_->add(step, scan_labels_);
     return unknown;

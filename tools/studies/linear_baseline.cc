@@ -22,9 +22,6 @@ double seconds_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double>(b - a).count();
 }
 
-// New landmarks get ids (scan step) * 2^20 + (observation index), as in the engine.
-constexpr std::uint64_t kObservationsPerScanLimit = std::uint64_t{1} << 20;
-
 }  // namespace
 
 LinearFastSlam::LinearFastSlam(const engine::FilterConfig& config)
@@ -201,7 +198,7 @@ void LinearFastSlam::update_map(Particle& p, std::span<const Eigen::Vector2d> z,
     memory::Landmark stored;
     engine::store_gaussian(engine::initialize_landmark(sensor_, pose, z[j], r_), stored);
     stored.log_odds = ex.initial;
-    stored.id = scan_step * kObservationsPerScanLimit + j;
+    stored.id = scan_step * engine::kLandmarkIdsPerScan + j;
     stored.last_seen = static_cast<std::int64_t>(scan_step);
     map.push_back(stored);
     ++stats_.landmarks_created;
@@ -209,7 +206,7 @@ void LinearFastSlam::update_map(Particle& p, std::span<const Eigen::Vector2d> z,
 }
 
 void LinearFastSlam::observe(std::span<const engine::Observation> scan) {
-  if (scan.size() >= kObservationsPerScanLimit) {
+  if (scan.size() >= engine::kLandmarkIdsPerScan) {
     throw std::invalid_argument("linear baseline: observe: too many observations in a scan");
   }
   std::vector<Eigen::Vector2d> z;

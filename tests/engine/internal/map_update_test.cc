@@ -153,7 +153,7 @@ TEST(MapUpdateTest, MatchesTheOracle) {
     const auto found = want.find(slot);
     if (found == want.end()) {
       // A new landmark: id (scan step) * 2^20 + observation index.
-      const std::size_t j = l.id - 33 * kObservationsPerScanLimit;
+      const std::size_t j = l.id - 33 * kLandmarkIdsPerScan;
       ASSERT_LT(j, w.scan.size());
       EXPECT_EQ(w.assignment[j], kNewLandmark);
       const LandmarkGaussian g = initialize_landmark(w.sensor, w.pose, w.scan[j].z, w.in.r);
@@ -182,7 +182,7 @@ TEST(MapUpdateTest, NewLandmarksStartingConfirmedAreListed) {
   update_particle_map<true>(w.in, w.pose, w.scan, w.assignment, {}, {}, w.map, scratch, counts);
   std::vector<memory::Slot> fresh;  // the three new landmarks, by their ids
   for (const auto [slot, l] : w.map) {
-    if (l.id >= 33 * kObservationsPerScanLimit) fresh.push_back(slot);
+    if (l.id >= 33 * kLandmarkIdsPerScan) fresh.push_back(slot);
   }
   ASSERT_EQ(fresh.size(), 3u);
   for (const memory::Slot slot : fresh) {

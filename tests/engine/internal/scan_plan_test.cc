@@ -73,7 +73,7 @@ TEST(ScanPlanTest, RefusesBadObservations) {
   EXPECT_NO_THROW(plan_scan(negative, Association::kMaximumLikelihood, {}));
   const std::vector<Observation> repeated = {{1.0, 0.0, 4}, {2.0, 0.0, 4}};
   EXPECT_THROW(plan_scan(repeated, Association::kKnown, {}), std::invalid_argument);
-  const std::vector<Observation> too_many(kObservationsPerScanLimit, Observation{1.0, 0.0, -1});
+  const std::vector<Observation> too_many(kLandmarkIdsPerScan, Observation{1.0, 0.0, -1});
   EXPECT_THROW(plan_scan(too_many, Association::kMaximumLikelihood, {}), std::invalid_argument);
 }
 
