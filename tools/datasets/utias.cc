@@ -324,8 +324,8 @@ Utias read_utias(const std::string& dir, const UtiasOptions& options) {
   h.motion.kind = engine::MotionKind::kUnicycle;
   h.motion.sigma_control[0] = kUtiasSigmaV;
   h.motion.sigma_control[1] = kUtiasSigmaOmega;
-  h.sensor.sigma_range = kUtiasSigmaRange;
-  h.sensor.sigma_bearing = kUtiasSigmaBearing;
+  h.sensor.sigma_range = kUtiasSigmaRange * kUtiasSensorWidth;
+  h.sensor.sigma_bearing = kUtiasSigmaBearing * kUtiasSensorWidth;
   h.sensor.max_range = kUtiasMaxRange;
   h.sensor.field_of_view = kUtiasFieldOfView;
   h.start_time = 0.0;

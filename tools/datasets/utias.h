@@ -32,6 +32,12 @@ inline constexpr double kUtiasSigmaRange = 0.116;     // m
 inline constexpr double kUtiasSigmaBearing = 0.0103;  // rad
 inline constexpr double kUtiasMaxRange = 7.32;        // m
 inline constexpr double kUtiasFieldOfView = 1.06;     // rad
+// The header's sensor noise is the calibration's times this width: with the barcodes as ids, the
+// smallest width (in steps of 0.25) that leaves at most 5 % of the innovations beyond the
+// chi-square 95 % point, pooled over robots 1-5 and seeds 1-3 (tools/scripts/noise_width.py;
+// docs/utias.md, "The filter's sensor width"). The innovations also carry the pose's and map's
+// error, which the odometry's time-correlated error makes wider than independent noises say.
+inline constexpr double kUtiasSensorWidth = 2.5;
 // Seconds each robot's odometry leads its Vicon motion (the shift that best aligns the two,
 // from the same script), robots 1-5: the reader stamps every control this much later.
 inline constexpr std::array<double, 5> kUtiasOdometryLead = {0.14, 0.14, 0.16, 0.16, 0.22};

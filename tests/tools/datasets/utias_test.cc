@@ -96,11 +96,13 @@ TEST(UtiasData, RobotOneCountsAndOneTimeOrder) {
   EXPECT_EQ(controls, 75000u);
   EXPECT_EQ(scans, u.scans);
   EXPECT_EQ(truths, 15000u);
-  // Header: unicycle, the calibrated noises, the first Vicon pose at t = 0.
+  // Header: unicycle, the calibrated noises (the sensor's widened), the first Vicon pose at
+  // t = 0.
   const LogHeader& h = u.log.header;
   EXPECT_EQ(h.motion.kind, engine::MotionKind::kUnicycle);
   EXPECT_EQ(h.motion.sigma_control[0], kUtiasSigmaV);
-  EXPECT_EQ(h.sensor.sigma_bearing, kUtiasSigmaBearing);
+  EXPECT_EQ(h.sensor.sigma_range, kUtiasSigmaRange * kUtiasSensorWidth);
+  EXPECT_EQ(h.sensor.sigma_bearing, kUtiasSigmaBearing * kUtiasSensorWidth);
   EXPECT_EQ(h.sensor.field_of_view, kUtiasFieldOfView);
   EXPECT_EQ(h.start_time, 0.0);
   EXPECT_EQ(h.start_pose[0], 3.5732);
