@@ -26,7 +26,7 @@ using Json = nlohmann::ordered_json;
 using engine::FilterConfig;
 
 // A field added to FilterConfig changes its size: add its key to visit_config, then update this.
-static_assert(sizeof(FilterConfig) == 400, "FilterConfig changed: update visit_config's keys");
+static_assert(sizeof(FilterConfig) == 408, "FilterConfig changed: update visit_config's keys");
 
 // FilterConfig's keys in struct order, for the reader and the writer alike, so the two cannot
 // drift apart. `C` is FilterConfig or const FilterConfig.
@@ -99,6 +99,7 @@ void visit_config(C& c, V& v) {
     l.field("max_turn", c.loop_closure.max_turn);
     l.field("merge_gate", c.loop_closure.merge_gate);
   });
+  v.field("error_correlation", c.error_correlation);
 }
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) {

@@ -93,6 +93,12 @@ void validate(const FilterConfig& c) {
           "loop_closure.max_turn must be in (0, pi] radians");
   require(std::isfinite(c.loop_closure.merge_gate) && c.loop_closure.merge_gate >= 0,
           "loop_closure.merge_gate must be finite and >= 0");
+  require(c.error_correlation >= 0 && c.error_correlation < 1,
+          "error_correlation must be in [0, 1)");
+  require(c.error_correlation == 0 || c.algorithm == Algorithm::kFastSlam2,
+          "error_correlation is FastSLAM 2.0's (its weights are scored apart from its proposal); "
+          "use 0 with " +
+              std::string(to_string(c.algorithm)));
 }
 
 }  // namespace fastslam::engine

@@ -221,6 +221,15 @@ struct FilterConfig {
   // Last, so that a saved state's earlier fields keep their offsets (engine/internal/state_io).
   DetectionConfig detection;       // FastSLAM with ml or das (the EKF baseline ignores it)
   LoopClosureConfig loop_closure;  // FastSLAM with ml or das (the EKF baseline ignores it)
+  // The lag-1 correlation of one landmark's measurement errors from scan to scan, in [0, 1): 0
+  // for independent errors. A systematic error (a sensor's mounting, the odometry's drift
+  // between sightings) repeats while a landmark stays in view, so n sightings carry the
+  // information of only n (1 - rho) / (1 + rho) independent ones. FastSLAM 2.0 then scores its
+  // associations and weights with the sensor noise R (1 + rho) / (1 - rho) (proposal.h
+  // weight_scale), and keeps R for its proposal and landmark updates. A run's innovations
+  // estimate it (tools/scripts/innovation_correlation.py, docs/engine-config.md). FastSLAM 2.0
+  // only.
+  double error_correlation = 0.0;
 };
 
 // Throws std::invalid_argument naming the first unusable field (zero particles, a non-positive

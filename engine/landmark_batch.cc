@@ -261,10 +261,11 @@ void store_proposal(const PoseGaussian<N>& g, const ProposalLanes<N>& p, std::si
 }
 
 // The proposal lanes [first, first + count) copied into local arrays, folded, written back.
-template <int N, bool kOffset>
+// kScaled: the weight term under L + (weight_scale - 1) R (proposal.h weight_scale).
+template <int N, bool kOffset, bool kScaled>
 void fold_chunk(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, const Eigen::Vector2d& z,
                 const ProposalLanes<N>& p, const ConstLandmarkLanes& lm, double* log_w,
-                std::size_t first, std::size_t count) {
+                std::size_t first, std::size_t count, double weight_scale) {
   constexpr int E = kEntries<N>;
   constexpr std::size_t C = kProposalChunk;
   const SensorOffset& off = sensor.offset();
@@ -272,6 +273,9 @@ void fold_chunk(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, const
   const double r00 = r(0, 0);
   const double r01 = 0.5 * (r(0, 1) + r(1, 0));
   const double r11 = r(1, 1);
+  const double w00 = (weight_scale - 1.0) * r00;
+  const double w01 = (weight_scale - 1.0) * r01;
+  const double w11 = (weight_scale - 1.0) * r11;
   const double z0 = z[0];
   const double z1 = z[1];
   alignas(64) double mean[N][C];
@@ -341,7 +345,16 @@ void fold_chunk(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, const
     const double i01 = -l01 * inv_det;
     const double i11 = l00 * inv_det;
     const double m2 = v0 * (i00 * v0 + i01 * v1) + v1 * (i01 * v0 + i11 * v1);
-    const double ll = -kLogTwoPi - 0.5 * log_positive(select(good, det, 1.0)) - 0.5 * m2;
+    double ll = -kLogTwoPi - 0.5 * log_positive(select(good, det, 1.0)) - 0.5 * m2;
+    if constexpr (kScaled) {
+      const double a00 = l00 + w00;
+      const double a01 = l01 + w01;
+      const double a11 = l11 + w11;
+      const double det_w = a00 * a11 - a01 * a01;
+      good = good & (det_w > 0.0) & (det_w < 1e300);
+      const double m2_w = (v0 * (a11 * v0 - a01 * v1) + v1 * (a00 * v1 - a01 * v0)) / det_w;
+      ll = -kLogTwoPi - 0.5 * log_positive(select(good, det_w, 1.0)) - 0.5 * m2_w;
+    }
     // K = Sigma_s G_s^T L^-1 (N x 2); the folded mean; A = I - K G_s.
     double k0[N];
     double k1[N];
@@ -421,7 +434,8 @@ void fold_chunk(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, const
     g.mean << lm.x[at], lm.y[at];
     g.cov << lm.sxx[at], lm.sxy[at], lm.sxy[at], lm.syy[at];
     const PoseGaussian<N> before = proposal_of<N>(p, at);
-    const ProposalObservation<N> terms = evaluate_proposal<N>(sensor, g, before, z, r);
+    ProposalObservation<N> terms = evaluate_proposal<N>(sensor, g, before, z, r);
+    if constexpr (kScaled) scale_weight<N>(terms, r, weight_scale);
     log_w[at] += terms.log_likelihood;
     store_proposal<N>(fold<N>(before, terms), p, at);
   }
@@ -432,14 +446,21 @@ void fold_chunk(const RangeBearingModel& sensor, const Eigen::Matrix2d& r, const
 template <int N>
 void fold_proposal_lanes(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
                          const Eigen::Vector2d& z, ProposalLanes<N> proposal, ConstLandmarkLanes lm,
-                         double* log_w, std::size_t lanes) {
+                         double* log_w, std::size_t lanes, double weight_scale) {
   const bool has_offset = sensor.offset().x != 0.0 || sensor.offset().y != 0.0;
+  const bool scaled = weight_scale != 1.0;
   for (std::size_t first = 0; first < lanes; first += kProposalChunk) {
     const std::size_t count = std::min(kProposalChunk, lanes - first);
     if (has_offset) {
-      fold_chunk<N, true>(sensor, r, z, proposal, lm, log_w, first, count);
+      if (scaled) {
+        fold_chunk<N, true, true>(sensor, r, z, proposal, lm, log_w, first, count, weight_scale);
+      } else {
+        fold_chunk<N, true, false>(sensor, r, z, proposal, lm, log_w, first, count, 1.0);
+      }
+    } else if (scaled) {
+      fold_chunk<N, false, true>(sensor, r, z, proposal, lm, log_w, first, count, weight_scale);
     } else {
-      fold_chunk<N, false>(sensor, r, z, proposal, lm, log_w, first, count);
+      fold_chunk<N, false, false>(sensor, r, z, proposal, lm, log_w, first, count, 1.0);
     }
   }
 }
@@ -518,10 +539,10 @@ void sample_pose_lanes(ProposalLanes<N> proposal, const double* normals, double*
 
 template void fold_proposal_lanes<3>(const RangeBearingModel&, const Eigen::Matrix2d&,
                                      const Eigen::Vector2d&, ProposalLanes<3>, ConstLandmarkLanes,
-                                     double*, std::size_t);
+                                     double*, std::size_t, double);
 template void fold_proposal_lanes<5>(const RangeBearingModel&, const Eigen::Matrix2d&,
                                      const Eigen::Vector2d&, ProposalLanes<5>, ConstLandmarkLanes,
-                                     double*, std::size_t);
+                                     double*, std::size_t, double);
 template void sample_pose_lanes<3>(ProposalLanes<3>, const double*, double* const*, std::size_t);
 template void sample_pose_lanes<5>(ProposalLanes<5>, const double*, double* const*, std::size_t);
 

@@ -63,12 +63,13 @@ struct ConstLandmarkLanes {
 };
 
 // For every lane l < lanes: observation z of landmark l evaluated against proposal l
-// (evaluate_proposal: linearised at the proposal's mean), its ln N(v; 0, L) added to log_w[l],
-// and the proposal replaced by the folded one (fold). N = 3 or 5.
+// (evaluate_proposal: linearised at the proposal's mean), its ln N(v; 0, L) added to log_w[l]
+// (ln N(v; 0, L + (weight_scale - 1) R) with a weight scale, proposal.h), and the proposal
+// replaced by the folded one (fold). N = 3 or 5.
 template <int N>
 void fold_proposal_lanes(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
                          const Eigen::Vector2d& z, ProposalLanes<N> proposal, ConstLandmarkLanes lm,
-                         double* log_w, std::size_t lanes);
+                         double* log_w, std::size_t lanes, double weight_scale = 1.0);
 
 // For every lane l < lanes: state[k][l] = sample_pose(proposal l, &normals[N * l])[k], the
 // heading wrapped. N = 3 or 5.
@@ -78,10 +79,10 @@ void sample_pose_lanes(ProposalLanes<N> proposal, const double* normals, double*
 
 extern template void fold_proposal_lanes<3>(const RangeBearingModel&, const Eigen::Matrix2d&,
                                             const Eigen::Vector2d&, ProposalLanes<3>,
-                                            ConstLandmarkLanes, double*, std::size_t);
+                                            ConstLandmarkLanes, double*, std::size_t, double);
 extern template void fold_proposal_lanes<5>(const RangeBearingModel&, const Eigen::Matrix2d&,
                                             const Eigen::Vector2d&, ProposalLanes<5>,
-                                            ConstLandmarkLanes, double*, std::size_t);
+                                            ConstLandmarkLanes, double*, std::size_t, double);
 extern template void sample_pose_lanes<3>(ProposalLanes<3>, const double*, double* const*,
                                           std::size_t);
 extern template void sample_pose_lanes<5>(ProposalLanes<5>, const double*, double* const*,

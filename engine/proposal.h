@@ -58,8 +58,17 @@ struct ProposalObservation {
   Eigen::Matrix2d l_inv;               // L^-1
   double log_det_l = 0.0;              // ln det L
   double mahalanobis2 = 0.0;           // v^T L^-1 v
-  double log_likelihood = 0.0;         // ln N(v; 0, L) (eq. 61 at the current proposal)
+  // ln N(v; 0, L) (eq. 61 at the current proposal); after scale_weight, ln N(v; 0, L + (k - 1)
+  // R), the likelihood the association and the weight use.
+  double log_likelihood = 0.0;
 };
+
+// The factor on R in FastSLAM 2.0's association and weight likelihoods for measurement errors
+// of lag-1 correlation rho from scan to scan (FilterConfig::error_correlation): n sightings then
+// carry the information of n (1 - rho) / (1 + rho) independent ones. 1 for rho = 0.
+inline double weight_scale(double error_correlation) {
+  return (1.0 + error_correlation) / (1.0 - error_correlation);
+}
 
 // Core: the terms from a linearisation at (mu, mu_s) and the wrapped innovation.
 // REQUIRES: landmark_cov and proposal.cov symmetric PSD, r symmetric positive definite.
@@ -87,6 +96,19 @@ inline ProposalObservation<N> evaluate_proposal(const MeasurementLinearization<N
   out.mahalanobis2 = innovation.dot(inv.inverse * innovation);
   out.log_likelihood = gaussian_log_density2(out.mahalanobis2, inv.log_det);
   return out;
+}
+
+// The likelihood of `obs` rescored under L + (weight_scale - 1) R (weight_scale above): what
+// the association and the weight use; the terms the fold reads stay. A separate step, so that
+// evaluate_proposal compiles as it does without it.
+template <int N>
+inline void scale_weight(ProposalObservation<N>& obs, const Eigen::Matrix2d& r,
+                         double weight_scale) {
+  Eigen::Matrix2d lw = obs.l + (weight_scale - 1.0) * r;
+  lw(0, 1) = lw(1, 0) = 0.5 * (lw(0, 1) + lw(1, 0));
+  const SymmetricInverse2 w = invert_symmetric2(lw);
+  obs.log_likelihood =
+      gaussian_log_density2(obs.innovation.dot(w.inverse * obs.innovation), w.log_det);
 }
 
 // `model.linearize` for the model's own pose, `linearize_state<N>` for a longer state.

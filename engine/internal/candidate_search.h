@@ -74,6 +74,8 @@ struct SearchInput {
   // discs' centres then take one sine and cosine per particle, not one per observation. Empty:
   // each centre from RangeBearingModel::landmark_from.
   std::span<const Eigen::Vector2d> bearings;
+  // FastSLAM 2.0: candidates scored under L + (scale - 1) R (proposal.h weight_scale).
+  double weight_scale = 1.0;
 };
 
 // The scan's bearings as SearchInput::bearings takes them, into `out`.
@@ -231,7 +233,8 @@ void find_candidates(const SearchInput& in, const PoseGaussian<N>& prior,
         }
         if constexpr (kFs2) {
           const LandmarkGaussian lm = to_gaussian(map.at(e.slot));
-          const ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, in.r);
+          ProposalObservation<N> t = evaluate_proposal<N>(sensor, lm, prior, z, in.r);
+          if (in.weight_scale != 1.0) scale_weight<N>(t, in.r, in.weight_scale);
           if (t.mahalanobis2 <= gate && !(kMl && t.log_likelihood < log_p0)) {
             scratch.candidates.push_back(
                 {obs, e.slot, t.log_likelihood, 0, static_cast<float>(t.mahalanobis2)});

@@ -32,13 +32,15 @@ struct Fs2Draw {
   double folded = 0.0;  // sum of the folds' ln-likelihoods and the new ones' log_unassociated
 };
 
-// `chosen[j]` is observation j's slot or kNewLandmark; `normals` N standard normals.
+// `chosen[j]` is observation j's slot or kNewLandmark; `normals` N standard normals; the folds'
+// terms under L + (weight_scale - 1) R (proposal.h).
 template <int N>
 Fs2Draw<N> fold_and_draw(const RangeBearingModel& sensor, const Eigen::Matrix2d& r,
                          std::span<const double> log_unassociated, const PoseGaussian<N>& prior,
                          const memory::LandmarkTree& map,
                          const std::vector<PlannedObservation>& scan,
-                         std::span<const std::int64_t> chosen, const double* normals) {
+                         std::span<const std::int64_t> chosen, const double* normals,
+                         double weight_scale = 1.0) {
   PoseGaussian<N> proposal = prior;
   Fs2Draw<N> out;
   for (std::size_t j = 0; j < scan.size(); ++j) {
@@ -47,7 +49,8 @@ Fs2Draw<N> fold_and_draw(const RangeBearingModel& sensor, const Eigen::Matrix2d&
       continue;
     }
     const LandmarkGaussian lm = to_gaussian(map.at(static_cast<memory::Slot>(chosen[j])));
-    const ProposalObservation<N> terms = evaluate_proposal<N>(sensor, lm, proposal, scan[j].z, r);
+    ProposalObservation<N> terms = evaluate_proposal<N>(sensor, lm, proposal, scan[j].z, r);
+    if (weight_scale != 1.0) scale_weight<N>(terms, r, weight_scale);
     out.folded += terms.log_likelihood;
     proposal = fold<N>(proposal, terms);
   }

@@ -71,7 +71,7 @@ void propose_block_known(const KnownInput& in, const std::vector<PlannedObservat
       lm[4][l] = stored.syy;
     }
     fold_proposal_lanes<N>(*in.sensor, in.r, o.z, proposal, {lm[0], lm[1], lm[2], lm[3], lm[4]},
-                           log_w, count);
+                           log_w, count, in.weight_scale);
   }
   draw_block<N>(proposal, draws, state, covariances, begin, count, scratch);
   double* const log_weight = store.log_weight().data();

@@ -46,6 +46,7 @@ struct KnownInput {
   Eigen::Matrix2d r;
   ExistenceConfig existence;
   std::uint64_t scan_step = 0;
+  double weight_scale = 1.0;  // FastSLAM 2.0's weight terms under L + (scale - 1) R (proposal.h)
 };
 
 // FastSLAM 2.0, particles [begin, end) of `store` with state dimension N (3 or 5): `draws` holds

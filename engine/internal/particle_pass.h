@@ -110,7 +110,7 @@ class ParticlePass final : public Pass {
     in.motion.ahead = &ahead_.ready();
     in.motion.runs = runs_;
     in.motion.partial = partial_;
-    in.known = {&s_.sensor, s_.r, c.existence, scan_step};
+    in.known = {&s_.sensor, s_.r, c.existence, scan_step, weight_scale(c.error_correlation)};
     in.search.sensor = &s_.sensor;
     in.search.r = s_.r;
     in.search.gate = c.gating.gate;
@@ -118,6 +118,7 @@ class ParticlePass final : public Pass {
     in.search.log_p0 = c.log_new_landmark;
     in.search.variance_bound = s_.landmark_variance_bound;
     in.search.bearings = bearings_;
+    in.search.weight_scale = weight_scale(c.error_correlation);
     in.map = {&s_.sensor,
               s_.r,
               c.existence,
@@ -299,8 +300,8 @@ class ParticlePass final : public Pass {
                                                     chosen, scratch.taken);
     }
     if constexpr (kFs2) {
-      const Fs2Draw<N> d =
-          fold_and_draw<N>(s_.sensor, s_.r, unassociated, prior, map, scan, chosen, draw);
+      const Fs2Draw<N> d = fold_and_draw<N>(s_.sensor, s_.r, unassociated, prior, map, scan, chosen,
+                                            draw, in.search.weight_scale);
       // Under ML the weight is the chain of the folds' terms; under DAS it stays the product
       // of the normalisers.
       if constexpr (kMl) log_w = d.folded;

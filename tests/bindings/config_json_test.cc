@@ -232,7 +232,8 @@ TEST(ConfigJson, WritesEveryKey) {
                                           "loop_closure.min_age",
                                           "loop_closure.separation",
                                           "loop_closure.max_turn",
-                                          "loop_closure.merge_gate"};
+                                          "loop_closure.merge_gate",
+                                          "error_correlation"};
   EXPECT_EQ(paths, expected);
 }
 

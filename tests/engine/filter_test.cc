@@ -127,6 +127,17 @@ TEST(FilterConfigTest, ValidateNamesTheFirstBadField) {
          c.motion_draw = MotionDraw::kComposed;
          c.motion.kind = MotionKind::kBrownian;
        }},
+      {"error_correlation must be in [0, 1)",
+       [](FilterConfig& c) {
+         c.algorithm = Algorithm::kFastSlam2;
+         c.error_correlation = 1.0;
+       }},
+      {"error_correlation must be in [0, 1)",
+       [](FilterConfig& c) {
+         c.algorithm = Algorithm::kFastSlam2;
+         c.error_correlation = kNaN;
+       }},
+      {"error_correlation is FastSLAM 2.0's", [](FilterConfig& c) { c.error_correlation = 0.5; }},
   };
   for (const Case& k : cases) {
     SCOPED_TRACE(k.needle);

@@ -264,8 +264,9 @@ ProposalColumns<N> random_proposals(std::mt19937_64& rng, const Scene& s, std::s
   return out;
 }
 
+// `weight_scale`: the lanes' weight terms against evaluate_proposal's with the same scale.
 template <int N>
-void expect_proposals_match(int seed) {
+void expect_proposals_match(int seed, double weight_scale = 1.0) {
   constexpr int E = ProposalColumns<N>::E;
   std::mt19937_64 rng(seed);
   for (const bool offset : {false, true}) {
@@ -274,7 +275,8 @@ void expect_proposals_match(int seed) {
       const std::size_t n = 3 + 7 * trial;
       ProposalColumns<N> cols = random_proposals<N>(rng, s, n);
       const ProposalColumns<N> before = cols;
-      fold_proposal_lanes<N>(s.sensor, s.r, s.z, cols.proposal(), cols.lm(), cols.log_w(), n);
+      fold_proposal_lanes<N>(s.sensor, s.r, s.z, cols.proposal(), cols.lm(), cols.log_w(), n,
+                             weight_scale);
       std::vector<double> normals(N * n);
       std::normal_distribution<double> noise;
       for (double& x : normals) x = noise(rng);
@@ -286,8 +288,9 @@ void expect_proposals_match(int seed) {
         SCOPED_TRACE("N " + std::to_string(N) + " offset " + std::to_string(offset) + " trial " +
                      std::to_string(trial) + " lane " + std::to_string(l));
         const PoseGaussian<N> prior = before.gaussian(l);
-        const ProposalObservation<N> t =
+        ProposalObservation<N> t =
             evaluate_proposal<N>(s.sensor, before.landmark(l), prior, s.z, s.r);
+        if (weight_scale != 1.0) scale_weight<N>(t, s.r, weight_scale);
         const PoseGaussian<N> want = fold<N>(prior, t);
         const PoseGaussian<N> got = cols.gaussian(l);
         const double scale = std::sqrt(prior.cov.diagonal().maxCoeff()) + 1e-3;
@@ -321,6 +324,13 @@ TEST(ProposalLanesTest, EveryLaneMatchesEvaluateFoldAndSample) {
   expect_proposals_match<5>(61);
 }
 
+// With a weight scale (FilterConfig::error_correlation) every lane's weight term is
+// evaluate_proposal's under the same scale, and the fold and draw are unchanged.
+TEST(ProposalLanesTest, ScaledWeightsMatchEvaluateProposal) {
+  expect_proposals_match<3>(71, 17.2);
+  expect_proposals_match<5>(73, 2.0);
+}
+
 TEST(ProposalLanesTest, LaneBitsDependOnTheLaneAloneAndFallbacksAreScalar) {
   std::mt19937_64 rng(67);
   const Scene s = random_setup(rng, true);
@@ -349,6 +359,14 @@ TEST(ProposalLanesTest, LaneBitsDependOnTheLaneAloneAndFallbacksAreScalar) {
     for (int j = i; j < 3; ++j) EXPECT_EQ(got.cov(i, j), want.cov(i, j));
   }
   EXPECT_EQ(block.c[3 + 6 + 5][7], block_before.c[3 + 6 + 5][7] + t.log_likelihood);
+  // Scaled, the fallback lane's weight term is evaluate_proposal's with the scale.
+  ProposalColumns<3> scaled = block_before;
+  fold_proposal_lanes<3>(s.sensor, s.r, s.z, scaled.proposal(), scaled.lm(), scaled.log_w(), 45,
+                         5.0);
+  ProposalObservation<3> ts = t;
+  scale_weight<3>(ts, s.r, 5.0);
+  EXPECT_EQ(scaled.c[3 + 6 + 5][7], block_before.c[3 + 6 + 5][7] + ts.log_likelihood);
+  EXPECT_EQ(scaled.gaussian(7).mean[0], want.mean[0]);
 }
 
 }  // namespace

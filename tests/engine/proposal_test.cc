@@ -335,6 +335,43 @@ TEST(ProposalTest, ObservationTermsAreConsistentWithTheLandmarkEkf) {
   EXPECT_TRUE(folded.cov.isZero(0.0));
 }
 
+// scale_weight moves only the likelihood, to ln N(v; 0, L + (k - 1) R) (a closed-form density,
+// oracle), and leaves the proposal's terms and its fold bit for bit; k = 1 gives the plain
+// likelihood back; weight_scale(rho) = (1 + rho) / (1 - rho).
+TEST(ProposalTest, WeightScaleWidensOnlyTheLikelihood) {
+  EXPECT_EQ(weight_scale(0.0), 1.0);
+  EXPECT_DOUBLE_EQ(weight_scale(0.5), 3.0);
+  EXPECT_DOUBLE_EQ(weight_scale(0.89), 1.89 / 0.11);
+  const RangeBearingModel model;
+  const PoseGaussian<3> motion = small_prior(1.0);
+  LandmarkGaussian lm;
+  lm.mean = model.landmark_from({10.0, 0.3}, motion.mean);
+  lm.cov << 0.04, 0.01, 0.01, 0.02;
+  const Eigen::Vector2d z(10.4, 0.33);
+  const Eigen::Matrix2d r = small_r();
+  const ProposalObservation<3> plain = evaluate_proposal<3>(model, lm, motion, z, r);
+  ProposalObservation<3> one = plain;
+  scale_weight<3>(one, r, 1.0);
+  EXPECT_NEAR(one.log_likelihood, plain.log_likelihood, 1e-13);
+  for (const double k : {2.0, 17.2}) {
+    SCOPED_TRACE(k);
+    ProposalObservation<3> w = plain;
+    scale_weight<3>(w, r, k);
+    const Eigen::Matrix2d lw = plain.l + (k - 1.0) * r;
+    const Eigen::Vector2d& v = plain.innovation;
+    const double expected =
+        -0.5 * std::log((2.0 * kPi * lw).determinant()) - 0.5 * v.dot(lw.inverse() * v);
+    EXPECT_NEAR(w.log_likelihood, expected, 1e-12 * std::max(1.0, std::abs(expected)));
+    EXPECT_NE(w.log_likelihood, plain.log_likelihood);
+    EXPECT_EQ(w.mahalanobis2, plain.mahalanobis2);  // the gate's distance is the proposal's
+    EXPECT_TRUE(matrices_near(w.l, plain.l, 0.0, 0.0));
+    const PoseGaussian<3> a = fold<3>(motion, w);
+    const PoseGaussian<3> b = fold<3>(motion, plain);
+    EXPECT_TRUE(matrices_near(a.mean, b.mean, 0.0, 0.0));
+    EXPECT_TRUE(matrices_near(a.cov, b.cov, 0.0, 0.0));
+  }
+}
+
 TEST(PsdFactorTest, ReproducesFullAndRankDeficientMatrices) {
   std::mt19937_64 rng(34);
   const BaileyCarModel car(4.0);

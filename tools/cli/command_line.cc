@@ -172,6 +172,9 @@ void apply_filter_defaults(const FilterDefaults& d, const Given& given, RunOptio
     o.filter.existence.missed = *d.existence_missed;
   }
   if (o.filter.algorithm == Algorithm::kFastSlam2) {
+    if (d.fastslam2_error_correlation && o.motion == "odometry" && !given("--error-correlation")) {
+      o.filter.error_correlation = *d.fastslam2_error_correlation;
+    }
     if (d.fastslam2_sigma_range && !given("--sigma-range")) {
       o.model.sigma_range = d.fastslam2_sigma_range;
     }
@@ -297,6 +300,13 @@ void add_run_options(CLI::App& cmd, RunOptions& o, RunWords& w) {
   cmd.add_option("--sigma-bearing", w.sigma_bearing,
                  "filter bearing noise, rad (default: the source's)")
       ->check(positive_number());
+  cmd.add_option("--error-correlation", o.filter.error_correlation,
+                 "fastslam2: lag-1 correlation of a landmark's measurement errors from scan to "
+                 "scan, in [0, 1); the association and the weights use the sensor noise x (1 + "
+                 "rho) / (1 - rho), the proposal and the map the noise itself "
+                 "(tools/scripts/innovation_correlation.py estimates it from a --stream file; "
+                 "default: the source's, else 0)")
+      ->check(number_in(0.0, 0.999));
   cmd.add_option("--sigma-u0", w.sigma_control0,
                  "filter noise of the first control component (speed m/s for the cars, v for the "
                  "unicycle, the v increment without odometry; default: the source's)")

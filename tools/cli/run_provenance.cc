@@ -102,6 +102,7 @@ nlohmann::json resolved_options_json(const RunOptions& o, const engine::FilterCo
       // The models, the source's unless overridden.
       {"sigma-range", config.sensor.sigma_range},
       {"sigma-bearing", config.sensor.sigma_bearing},
+      {"error-correlation", config.error_correlation},
       {"sigma-u0", config.motion.sigma_control[0]},
       {"sigma-u1", config.motion.sigma_control[1]},
       {"max-range", config.sensor.max_range},

@@ -46,9 +46,11 @@ struct FilterDefaults {
   std::optional<std::string_view> association;
   std::optional<double> existence_range_margin;  // m
   std::optional<double> existence_missed;        // log-odds
-  // FastSLAM 2.0 only: the sensor noises, replacing the header's.
+  // FastSLAM 2.0 only: the sensor noises, replacing the header's, and with odometry the
+  // measurement errors' correlation from scan to scan (engine::FilterConfig::error_correlation).
   std::optional<double> fastslam2_sigma_range;    // m
   std::optional<double> fastslam2_sigma_bearing;  // rad
+  std::optional<double> fastslam2_error_correlation;
 };
 
 // Which detections carry a landmark id.

@@ -19,6 +19,7 @@ FilterDefaults victoria_park_filter_defaults() {
   d.existence_missed = vp.existence_missed;
   d.fastslam2_sigma_range = vp.fastslam2_sigma_range;
   d.fastslam2_sigma_bearing = vp.fastslam2_sigma_bearing;
+  d.fastslam2_error_correlation = vp.fastslam2_error_correlation;
   return d;
 }
 

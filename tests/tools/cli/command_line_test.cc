@@ -295,8 +295,9 @@ TEST_F(CommandLine, SimulatorNoiseAndTraceOptions) {
   EXPECT_NE(error_of("{}", "--trace-every 0").find("trace-every"), std::string::npos);
 }
 
-// --source victoria-park brings its negative-information preset (tools/datasets/victoria_park.h)
-// for the options not given; a flag or a config key still wins; other sources keep the engine's.
+// --source victoria-park brings its negative-information preset and FastSLAM 2.0's noises and
+// error correlation (tools/datasets/victoria_park.h) for the options not given; a flag or a
+// config key still wins; other sources keep the engine's.
 TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
   const VictoriaParkFilterDefaults vp;
   const engine::ExistenceConfig engine_defaults;
@@ -311,8 +312,22 @@ TEST_F(CommandLine, VictoriaParkSourceSetsItsPresetUnlessGiven) {
   o = run("{}", "--source victoria-park --algorithm fastslam2 --sigma-range 0.7");
   EXPECT_EQ(*o.model.sigma_range, 0.7);
   EXPECT_EQ(*o.model.sigma_bearing, vp.fastslam2_sigma_bearing);
+  EXPECT_EQ(o.filter.error_correlation, vp.fastslam2_error_correlation);
+  EXPECT_EQ(run("{}", "--source victoria-park").filter.error_correlation, 0.0);  // FS1
+  // With odometry only; a flag or a config key wins.
+  EXPECT_EQ(run("{}", "--source victoria-park --algorithm fastslam2 --motion none")
+                .filter.error_correlation,
+            0.0);
+  EXPECT_EQ(run("{}", "--source victoria-park --algorithm fastslam2 --error-correlation 0.5")
+                .filter.error_correlation,
+            0.5);
+  EXPECT_EQ(run(R"({"error-correlation": 0})", "--source victoria-park --algorithm fastslam2")
+                .filter.error_correlation,
+            0.0);
+  EXPECT_NE(error_of("{}", "--error-correlation 1").find("error-correlation"), std::string::npos);
   o = run("{}", "--source sim --algorithm fastslam2");
   EXPECT_FALSE(o.model.sigma_bearing.has_value());
+  EXPECT_EQ(o.filter.error_correlation, 0.0);
   EXPECT_EQ(o.filter.existence.range_margin, engine_defaults.range_margin);
   EXPECT_EQ(o.filter.existence.missed, engine_defaults.missed);
 }

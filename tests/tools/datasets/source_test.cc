@@ -45,10 +45,12 @@ TEST(SourceRegistry, OnlyVictoriaParkRecommendsFilterSettings) {
   EXPECT_EQ(d.existence_missed, vp.existence_missed);
   EXPECT_EQ(d.fastslam2_sigma_range, vp.fastslam2_sigma_range);
   EXPECT_EQ(d.fastslam2_sigma_bearing, vp.fastslam2_sigma_bearing);
+  EXPECT_EQ(d.fastslam2_error_correlation, vp.fastslam2_error_correlation);
   for (const char* name : {"sim", "log"}) {
     const FilterDefaults& none = find_source(name).defaults;
     EXPECT_FALSE(none.existence_range_margin || none.existence_missed ||
-                 none.fastslam2_sigma_range || none.fastslam2_sigma_bearing)
+                 none.fastslam2_sigma_range || none.fastslam2_sigma_bearing ||
+                 none.fastslam2_error_correlation)
         << name;
   }
 }
