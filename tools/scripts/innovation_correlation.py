@@ -7,10 +7,13 @@ Reads `fastslam run --stream FILE` output (one JSON line per scan; each associat
 landmark and its squared Mahalanobis distance m2). Every landmark associated in two consecutive
 scans gives a pair (m2 then, m2 now). For a whitened two-dimensional Gaussian innovation whose
 components follow an AR(1) of coefficient rho, corr(m2_t, m2_t+1) = rho^2, so rho = sqrt of
-the pairs' Pearson correlation (0 when it is negative). A filter whose noise model is the
+the pairs' Pearson correlation (0 when it is negative), each m2 clipped at the law's 99.9 %
+point so that a few distances far outside the model cannot decide it. A filter whose noise model is the
 data's has white innovations (rho near 0); a systematic error that stays while a landmark is in
 view (a sensor's mounting, the odometry's drift) makes them repeat. The weight scale the filter
-then uses is (1 + rho) / (1 - rho).
+then uses is (1 + rho) / (1 - rho). So does a filter's own error once it has drifted, which the
+weights should not discount: check that the estimate holds across seeds before using it
+(docs/engine-config.md has both cases).
 
 Owns no state; costs one pass over the files.
 Usage: tools/scripts/innovation_correlation.py STREAM [STREAM ...] [--json FILE]
@@ -20,6 +23,11 @@ import argparse
 import json
 import math
 import sys
+
+
+# The chi-square (2 degrees of freedom) 99.9 % point: under the model 0.1 % of the distances lie
+# beyond it, so clipping there moves a consistent filter's correlation by little.
+CLIP = 13.815510557964274
 
 
 class StreamError(Exception):
@@ -62,7 +70,10 @@ def pairs_of(path):
 
 
 def estimate(pairs):
-    """A JSON-ready dict: the pairs' count, the m2 correlation, rho and the weight scale."""
+    """A JSON-ready dict: the pairs' count, the m2 correlation, rho and the weight scale. Each
+    m2 is clipped at CLIP first, so that a few innovations far outside the model (a loop
+    closing, a filter gone wrong) cannot decide the correlation."""
+    pairs = [(min(x, CLIP), min(y, CLIP)) for x, y in pairs]
     n = len(pairs)
     if n < 3:
         raise StreamError("only {} pairs of consecutive sightings: too few to estimate".format(n))
