@@ -4,7 +4,6 @@ known: whitened two-dimensional AR(1) innovations of coefficient rho for landmar
 a run of consecutive scans. The estimate recovers rho (0, 0.5, 0.9); only consecutive scans pair;
 new and unscored associations are left out; bad input is refused naming file and line.
 """
-import importlib.util
 import json
 import math
 import os
@@ -13,19 +12,11 @@ import subprocess
 import sys
 import tempfile
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..")
-SCRIPT = os.path.join(ROOT, "tools", "scripts", "innovation_correlation.py")
-spec = importlib.util.spec_from_file_location("innovation_correlation", SCRIPT)
-ic = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(ic)
+from script_checks import check, finish, load, script_path
 
-failures = []
+SCRIPT = script_path("innovation_correlation")
+ic = load("innovation_correlation")
 
-
-def check(condition, message):
-    if not condition:
-        failures.append(message)
-        print("FAIL:", message)
 
 
 def synthetic(path, rho, seed, landmarks=2000, run=20, gap_every=0):
@@ -118,11 +109,7 @@ def main():
         test_recovers_rho(tmp)
         test_only_consecutive_scans_pair(tmp)
         test_errors(tmp)
-    if failures:
-        print("{} failure(s)".format(len(failures)))
-        return 1
-    print("all passed")
-    return 0
+    return finish()
 
 
 if __name__ == "__main__":

@@ -9,7 +9,6 @@ Either needs ../shared (exit 77, skipped, when it is absent).
 
 Usage: noise_width_test.py FASTSLAM [--real]
 """
-import importlib.util
 import io
 import math
 import os
@@ -17,20 +16,12 @@ import re
 import subprocess
 import sys
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..")
-SCRIPT = os.path.join(ROOT, "tools", "scripts", "noise_width.py")
+from script_checks import ROOT, check, finish, load, script_path
+
+SCRIPT = script_path("noise_width")
 HEADER = os.path.join(ROOT, "tools", "datasets", "utias.h")
-spec = importlib.util.spec_from_file_location("noise_width", SCRIPT)
-nw = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(nw)
+nw = load("noise_width")
 
-failures = []
-
-
-def check(condition, message):
-    if not condition:
-        failures.append(message)
-        print("FAIL:", message)
 
 
 def shared_dir():
@@ -141,11 +132,7 @@ def main():
         test_arithmetic()
         case = test_simulated(fastslam, shared)
         test_errors(fastslam, case)
-    if failures:
-        print("{} failure(s)".format(len(failures)))
-        return 1
-    print("all passed")
-    return 0
+    return finish()
 
 
 if __name__ == "__main__":

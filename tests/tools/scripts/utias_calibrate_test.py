@@ -6,7 +6,6 @@ malformed input is refused naming file and line.
 With --real: the constants it prints for ../shared/data/utias_mrclam/dataset1 equal those
 tools/datasets/utias.h ships (exit 77, skipped, when the data is absent).
 """
-import importlib.util
 import math
 import os
 import re
@@ -16,23 +15,15 @@ import tempfile
 
 import numpy as np
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..")
-SCRIPT = os.path.join(ROOT, "tools", "scripts", "utias_calibrate.py")
-HEADER = os.path.join(ROOT, "tools", "datasets", "utias.h")
-spec = importlib.util.spec_from_file_location("utias_calibrate", SCRIPT)
-uc = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(uc)
+from script_checks import ROOT, check, finish, load, script_path
 
-failures = []
+SCRIPT = script_path("utias_calibrate")
+HEADER = os.path.join(ROOT, "tools", "datasets", "utias.h")
+uc = load("utias_calibrate")
+
 # The synthetic truth: per-sample control noise, sensor noise, half field of view, max range.
 SIGMA_V, SIGMA_W, SIGMA_R, SIGMA_B = 0.04, 0.1, 0.1, 0.02
 HALF_FOV, MAX_RANGE = 0.5, 6.0
-
-
-def check(condition, message):
-    if not condition:
-        failures.append(message)
-        print("FAIL:", message)
 
 
 def synthetic(out, seed=3, seconds=600, lead=0):
@@ -201,11 +192,7 @@ def main():
             good = test_synthetic(tmp)
             test_synthetic_lead(tmp)
             test_errors(tmp, good)
-    if failures:
-        print("{} failure(s)".format(len(failures)))
-        return 1
-    print("all passed")
-    return 0
+    return finish()
 
 
 if __name__ == "__main__":

@@ -7,7 +7,6 @@ rear axle, random trees, noisy detections from a laser mounted with known yaw an
 recovers them; malformed input is refused naming file and line.
 With --real: the yaw+a fit on ../shared/data/victoria_park (exit 77, skipped, when absent).
 """
-import importlib.util
 import json
 import math
 import os
@@ -17,20 +16,12 @@ import tempfile
 
 import numpy as np
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..")
-SCRIPT = os.path.join(ROOT, "tools", "scripts", "vp_calibrate.py")
-spec = importlib.util.spec_from_file_location("vp_calibrate", SCRIPT)
-vp = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(vp)
+from script_checks import check, finish, load, script_path
 
-failures = []
+SCRIPT = script_path("vp_calibrate")
+vp = load("vp_calibrate")
+
 SEED = 11
-
-
-def check(condition, message):
-    if not condition:
-        failures.append(message)
-        print("FAIL:", message)
 
 
 def rot(angle):
@@ -309,11 +300,7 @@ def main():
             test_axle_motion_and_jacobian()
             test_errors(tmp)
             test_synthetic(tmp)
-    if failures:
-        print("{} failure(s)".format(len(failures)))
-        return 1
-    print("all passed")
-    return 0
+    return finish()
 
 
 if __name__ == "__main__":
